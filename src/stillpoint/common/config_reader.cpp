@@ -1,0 +1,103 @@
+#include "stillpoint/common/config_reader.hpp"
+
+#include <functional>
+
+namespace sp {
+
+ConfigReader::ConfigReader(std::shared_ptr<State> state, YAML::Node node, std::string prefix)
+    : state_(std::move(state)), node_(std::move(node)), prefix_(std::move(prefix)) {}
+
+ConfigReader ConfigReader::from_file(const std::filesystem::path& file) {
+  if (!std::filesystem::exists(file)) throw ConfigError(file.string(), 0, "(file)", "file not found");
+  auto state = std::make_shared<State>();
+  state->file = file.string();
+  try {
+    state->root = YAML::LoadFile(file.string());
+  } catch (const YAML::ParserException& e) {
+    throw InputError(file.string(), e.mark.line + 1, "YAML syntax error: " + e.msg);
+  } catch (const YAML::Exception& e) {
+    throw InputError(file.string(), 0, std::string("cannot read YAML: ") + e.what());
+  }
+  if (state->root.IsNull()) state->root = YAML::Node(YAML::NodeType::Map);
+  if (!state->root.IsMap()) throw InputError(file.string(), 1, "top level must be a mapping of keys");
+  YAML::Node root = state->root;
+  return ConfigReader(std::move(state), root, "");
+}
+
+ConfigReader ConfigReader::from_string(const std::string& text, const std::string& origin) {
+  auto state = std::make_shared<State>();
+  state->file = origin;
+  try {
+    state->root = YAML::Load(text);
+  } catch (const YAML::ParserException& e) {
+    throw InputError(origin, e.mark.line + 1, "YAML syntax error: " + e.msg);
+  }
+  if (state->root.IsNull()) state->root = YAML::Node(YAML::NodeType::Map);
+  if (!state->root.IsMap()) throw InputError(origin, 1, "top level must be a mapping of keys");
+  YAML::Node root = state->root;
+  return ConfigReader(std::move(state), root, "");
+}
+
+bool ConfigReader::has(const std::string& key) const {
+  return node_.IsMap() && node_[key] && !node_[key].IsNull();
+}
+
+std::string ConfigReader::path_of(const std::string& key) const {
+  return prefix_.empty() ? key : prefix_ + "." + key;
+}
+
+void ConfigReader::mark_used(const std::string& key) const { state_->used.insert(path_of(key)); }
+
+std::string ConfigReader::scalar_text(const std::string& key) const {
+  const YAML::Node n = node_[key];
+  return n.IsScalar() ? n.Scalar() : std::string("<non-scalar>");
+}
+
+int ConfigReader::line_of(const std::string& key) const {
+  if (!node_.IsMap()) return 0;
+  const YAML::Node n = node_[key];
+  if (!n) return node_.Mark().line >= 0 ? node_.Mark().line + 1 : 0;
+  return n.Mark().line >= 0 ? n.Mark().line + 1 : 0;
+}
+
+void ConfigReader::fail(const std::string& key, const std::string& what) const {
+  throw ConfigError(state_->file, line_of(key), path_of(key), what);
+}
+
+void ConfigReader::read_choice(const std::string& key, std::string& field,
+                               const std::vector<std::string>& allowed) const {
+  read(key, field);
+  for (const auto& a : allowed) {
+    if (a == field) return;
+  }
+  std::string list;
+  for (const auto& a : allowed) list += (list.empty() ? "" : ", ") + a;
+  fail(key, "value '" + field + "' is not one of: " + list);
+}
+
+ConfigReader ConfigReader::section(const std::string& key) const {
+  mark_used(key);
+  if (!has(key)) return ConfigReader(state_, YAML::Node(YAML::NodeType::Map), path_of(key));
+  YAML::Node child = node_[key];
+  if (!child.IsMap()) fail(key, "must be a mapping of keys");
+  return ConfigReader(state_, child, path_of(key));
+}
+
+void ConfigReader::finish() const {
+  // Walk every key below this reader's node; the first one never read is an error.
+  std::function<void(const YAML::Node&, const std::string&)> walk = [&](const YAML::Node& node,
+                                                                         const std::string& prefix) {
+    for (const auto& kv : node) {
+      const std::string key = kv.first.as<std::string>();
+      const std::string full = prefix.empty() ? key : prefix + "." + key;
+      if (!state_->used.contains(full)) {
+        const int line = kv.first.Mark().line >= 0 ? kv.first.Mark().line + 1 : 0;
+        throw ConfigError(state_->file, line, full, "unknown key");
+      }
+      if (kv.second.IsMap()) walk(kv.second, full);
+    }
+  };
+  if (node_.IsMap()) walk(node_, prefix_);
+}
+
+}  // namespace sp

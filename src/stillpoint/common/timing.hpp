@@ -1,0 +1,71 @@
+#pragma once
+// Wall-clock measurement for statistics and benchmarks (never for test assertions).
+#include <algorithm>
+#include <chrono>
+#include <map>
+#include <mutex>
+#include <string>
+#include <vector>
+
+namespace sp {
+
+class Stopwatch {
+ public:
+  Stopwatch() : start_(Clock::now()) {}
+  void restart() { start_ = Clock::now(); }
+  [[nodiscard]] double elapsed_ms() const {
+    return std::chrono::duration<double, std::milli>(Clock::now() - start_).count();
+  }
+
+ private:
+  using Clock = std::chrono::steady_clock;
+  Clock::time_point start_;
+};
+
+struct SampleSummary {
+  std::size_t count = 0;
+  double total = 0, mean = 0, median = 0, p95 = 0, max = 0;
+};
+
+inline SampleSummary summarize(std::vector<double> samples) {
+  SampleSummary s;
+  s.count = samples.size();
+  if (samples.empty()) return s;
+  std::sort(samples.begin(), samples.end());
+  for (double v : samples) s.total += v;
+  s.mean = s.total / static_cast<double>(samples.size());
+  const auto at = [&](double q) {
+    const double pos = q * static_cast<double>(samples.size() - 1);
+    const auto lo = static_cast<std::size_t>(pos);
+    const std::size_t hi = std::min(lo + 1, samples.size() - 1);
+    return samples[lo] + (pos - static_cast<double>(lo)) * (samples[hi] - samples[lo]);
+  };
+  s.median = at(0.5);
+  s.p95 = at(0.95);
+  s.max = samples.back();
+  return s;
+}
+
+// Per-stage millisecond samples, written by several threads.
+class StageTimes {
+ public:
+  void add(const std::string& stage, double ms) {
+    std::lock_guard lock(mutex_);
+    samples_[stage].push_back(ms);
+  }
+  [[nodiscard]] std::map<std::string, SampleSummary> summaries() const {
+    std::lock_guard lock(mutex_);
+    std::map<std::string, SampleSummary> out;
+    for (const auto& [stage, v] : samples_) out[stage] = summarize(v);
+    return out;
+  }
+
+ private:
+  mutable std::mutex mutex_;
+  std::map<std::string, std::vector<double>> samples_;
+};
+
+// Peak resident set size of this process in MiB (VmHWM), 0 when unknown.
+double peak_rss_mib();
+
+}  // namespace sp

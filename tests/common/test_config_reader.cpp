@@ -1,0 +1,76 @@
+#include <gtest/gtest.h>
+
+#include "stillpoint/common/config_reader.hpp"
+
+namespace sp {
+namespace {
+
+TEST(ConfigReader, ReadsTypedValuesAndKeepsDefaults) {
+  auto cfg = ConfigReader::from_string("a: 3\nb: 2.5\nsub:\n  name: orb\n", "test.yaml");
+  int a = 0;
+  double b = 0;
+  double c = 7.0;
+  cfg.read("a", a);
+  cfg.read("b", b, 0.0, 10.0);
+  cfg.read("c", c);
+  std::string name = "x";
+  cfg.section("sub").read("name", name);
+  EXPECT_EQ(a, 3);
+  EXPECT_DOUBLE_EQ(b, 2.5);
+  EXPECT_DOUBLE_EQ(c, 7.0);
+  EXPECT_EQ(name, "orb");
+  EXPECT_NO_THROW(cfg.finish());
+}
+
+TEST(ConfigReader, UnknownKeyNamesFileKeyAndLine) {
+  auto cfg = ConfigReader::from_string("a: 1\nsub:\n  typo: 2\n", "cfg.yaml");
+  int a = 0;
+  cfg.read("a", a);
+  (void)cfg.section("sub");
+  try {
+    cfg.finish();
+    FAIL() << "expected an error";
+  } catch (const ConfigError& e) {
+    EXPECT_EQ(e.key(), "sub.typo");
+    EXPECT_EQ(e.line(), 3);
+    EXPECT_NE(std::string(e.what()).find("cfg.yaml:3"), std::string::npos);
+  }
+}
+
+TEST(ConfigReader, MissingRequiredKeyIsAnError) {
+  auto cfg = ConfigReader::from_string("a: 1\n", "cfg.yaml");
+  EXPECT_THROW((void)cfg.require<double>("fx"), ConfigError);
+}
+
+TEST(ConfigReader, OutOfRangeAndWrongTypeAreErrors) {
+  auto cfg = ConfigReader::from_string("a: 11\nb: hello\n", "cfg.yaml");
+  int a = 0;
+  EXPECT_THROW(cfg.read("a", a, 0, 10), ConfigError);
+  double b = 0;
+  try {
+    cfg.read("b", b);
+    FAIL();
+  } catch (const ConfigError& e) {
+    EXPECT_EQ(e.line(), 2);
+    EXPECT_NE(std::string(e.what()).find("hello"), std::string::npos);
+  }
+}
+
+TEST(ConfigReader, ChoiceMustBeListed) {
+  auto cfg = ConfigReader::from_string("mode: fast\n", "cfg.yaml");
+  std::string mode = "slow";
+  EXPECT_THROW(cfg.read_choice("mode", mode, {"slow", "exact"}), ConfigError);
+}
+
+TEST(ConfigReader, MissingFileAndSyntaxErrorNameTheFile) {
+  EXPECT_THROW((void)ConfigReader::from_file("/nonexistent/stillpoint.yaml"), ConfigError);
+  try {
+    (void)ConfigReader::from_string("a: [1, 2\nb: 3\n", "bad.yaml");
+    FAIL();
+  } catch (const InputError& e) {
+    EXPECT_EQ(e.file(), "bad.yaml");
+  }
+}
+
+}  // namespace
+}  // namespace sp

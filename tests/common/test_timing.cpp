@@ -1,0 +1,27 @@
+#include <gtest/gtest.h>
+
+#include "stillpoint/common/timing.hpp"
+
+namespace sp {
+namespace {
+
+TEST(Timing, SummaryOfKnownSamples) {
+  const auto s = summarize({5, 1, 4, 2, 3});
+  EXPECT_EQ(s.count, 5u);
+  EXPECT_DOUBLE_EQ(s.total, 15.0);
+  EXPECT_DOUBLE_EQ(s.mean, 3.0);
+  EXPECT_DOUBLE_EQ(s.median, 3.0);
+  EXPECT_DOUBLE_EQ(s.p95, 4.8);  // linear interpolation between 4 and 5
+  EXPECT_DOUBLE_EQ(s.max, 5.0);
+}
+
+TEST(Timing, EmptySummaryIsZero) {
+  const auto s = summarize({});
+  EXPECT_EQ(s.count, 0u);
+  EXPECT_DOUBLE_EQ(s.median, 0.0);
+}
+
+TEST(Timing, PeakRssIsPositiveOnLinux) { EXPECT_GT(peak_rss_mib(), 0.0); }
+
+}  // namespace
+}  // namespace sp
