@@ -1,0 +1,229 @@
+// `stillpoint vpr`: train and evaluate the ParC_NetVLAD place descriptor, and the BoW baseline.
+#include <spdlog/spdlog.h>
+
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
+
+#include "commands.hpp"
+#include "stillpoint/common/error.hpp"
+#include "stillpoint/common/progress_bar.hpp"
+#include "stillpoint/common/timing.hpp"
+#include "stillpoint/place/bow.hpp"
+#include "stillpoint/place/descriptor.hpp"
+#include "stillpoint/place/retrieval.hpp"
+#include "stillpoint/place/trainer.hpp"
+
+namespace sp::app {
+
+namespace {
+
+namespace fs = std::filesystem;
+using sp::place::RetrievalSet;
+
+struct TrainArgs {
+  sp::place::TrainOptions o;
+  std::string variant = "small", parc = "on", cbam = "on", config;
+  double width_mult = 0, depth_mult = 0;
+  int input_h = 0, input_w = 0, clusters = 0;
+};
+
+struct EvalArgs {
+  fs::path model, bow, dataset, json;
+  int threads = 2;
+  bool progress = true;
+};
+
+struct BowArgs {
+  std::vector<fs::path> data;
+  fs::path out;
+  int words = 1000, images = 400, features = 500;
+  std::uint64_t seed = 1;
+};
+
+cv::Mat read_image(const fs::path& p) {
+  cv::Mat im = cv::imread(p.string(), cv::IMREAD_COLOR);
+  if (im.empty()) throw sp::InputError(p.string(), 0, "cannot read image");
+  return im;
+}
+
+void run_train(TrainArgs& a) {
+  auto& o = a.o;
+  o.model = a.variant == "tiny" ? sp::place::ModelConfig::tiny() : sp::place::ModelConfig::small();
+  if (!a.config.empty()) {
+    const auto r = sp::ConfigReader::from_file(a.config);
+    o.model = sp::place::ModelConfig::from_yaml(r);
+    r.finish();
+  }
+  if (a.width_mult > 0 || a.depth_mult > 0) {
+    o.model = sp::place::ModelConfig::scaled(o.model, a.width_mult > 0 ? a.width_mult : 1.0,
+                                             a.depth_mult > 0 ? a.depth_mult : 1.0);
+  }
+  if (a.input_h > 0) o.model.input_height = a.input_h;
+  if (a.input_w > 0) o.model.input_width = a.input_w;
+  if (a.clusters > 0) o.model.clusters = a.clusters;
+  o.model.parc = a.parc == "on";
+  o.model.cbam = a.cbam == "on";
+  const auto stats = sp::place::train_model(o);
+  nlohmann::json j = nlohmann::json::array();
+  for (const auto& s : stats) {
+    j.push_back({{"epoch", s.epoch}, {"loss", s.loss}, {"active", s.active}, {"seconds", s.seconds}});
+  }
+  std::ofstream(o.out.string() + ".log.json") << j.dump(2) << "\n";
+}
+
+// Ranks the database for each query and scores Recall@1/5/10/20; writes JSON when asked.
+void run_eval(const EvalArgs& a) {
+  const RetrievalSet set = sp::place::load_retrieval_set(a.dataset);
+  spdlog::info("{}: {} queries, {} database images ({}){}", set.name, set.queries.size(), set.database.size(),
+               set.rule,
+               set.dropped_queries > 0 ? fmt::format(", {} queries dropped", set.dropped_queries) : "");
+  Eigen::MatrixXf dist;
+  std::vector<double> ms;
+  std::string method;
+  const auto all = [&] {
+    std::vector<fs::path> v = set.queries;
+    v.insert(v.end(), set.database.begin(), set.database.end());
+    return v;
+  }();
+  sp::ProgressBar bar("describing", all.size(), a.progress);
+  if (!a.model.empty()) {
+    method = "ParC_NetVLAD " + a.model.filename().string();
+    auto ex = sp::place::PlaceDescriptorExtractor::load(a.model, a.threads);
+    Eigen::MatrixXf desc(static_cast<Eigen::Index>(all.size()), ex.dimension());
+    for (size_t i = 0; i < all.size(); ++i) {
+      const cv::Mat im = read_image(all[i]);
+      sp::Stopwatch sw;
+      desc.row(static_cast<Eigen::Index>(i)) = ex.describe(im).transpose();
+      ms.push_back(sw.elapsed_ms());
+      if (i % 50 == 0) bar.update(i + 1);
+    }
+    const auto nq = static_cast<Eigen::Index>(set.queries.size());
+    dist = sp::place::squared_distances(desc.topRows(nq), desc.bottomRows(desc.rows() - nq));
+  } else if (!a.bow.empty()) {
+    method = "BoW (ORB)";
+    const auto voc = sp::place::BowVocabulary::load(a.bow);
+    std::vector<Eigen::VectorXf> v;
+    for (size_t i = 0; i < all.size(); ++i) {
+      const cv::Mat im = read_image(all[i]);
+      sp::Stopwatch sw;
+      v.push_back(voc.transform(sp::place::orb_descriptors(im)));
+      ms.push_back(sw.elapsed_ms());
+      if (i % 50 == 0) bar.update(i + 1);
+    }
+    const size_t nq = set.queries.size();
+    dist.resize(static_cast<Eigen::Index>(nq), static_cast<Eigen::Index>(set.database.size()));
+    for (size_t q = 0; q < nq; ++q) {
+      for (size_t d = 0; d < set.database.size(); ++d) {
+        dist(static_cast<Eigen::Index>(q), static_cast<Eigen::Index>(d)) =
+            1.0f - sp::place::BowVocabulary::score(v[q], v[nq + d]);
+      }
+    }
+  } else {
+    throw sp::Error("vpr eval: give --model or --bow");
+  }
+  bar.finish();
+  const auto r = sp::place::recall_at_n(dist, set.ground_truth);
+  const auto t = sp::summarize(ms);
+  spdlog::info("{} on {}: R@1 {:.3f} R@5 {:.3f} R@10 {:.3f} R@20 {:.3f} ({} queries), {:.1f} ms/image",
+               method, set.name, r.recall[0], r.recall[1], r.recall[2], r.recall[3], r.queries, t.mean);
+  if (!a.json.empty()) {
+    nlohmann::json j = {{"method", method},
+                        {"dataset", a.dataset.string()},
+                        {"set", set.name},
+                        {"rule", set.rule},
+                        {"recall@1", r.recall[0]},
+                        {"recall@5", r.recall[1]},
+                        {"recall@10", r.recall[2]},
+                        {"recall@20", r.recall[3]},
+                        {"queries", r.queries},
+                        {"dropped_queries", set.dropped_queries},
+                        {"database", set.database.size()},
+                        {"ms_per_image", t.mean},
+                        {"ms_per_image_median", t.median}};
+    if (a.json.has_parent_path()) fs::create_directories(a.json.parent_path());
+    std::ofstream(a.json) << j.dump(2) << "\n";
+  }
+}
+
+void run_bow_train(const BowArgs& a) {
+  const auto imgs = sp::place::collect_places(a.data);
+  // Evenly spaced images so that every room contributes.
+  const size_t step = std::max<size_t>(1, imgs.size() / static_cast<size_t>(a.images));
+  std::vector<cv::Mat> desc;
+  for (size_t i = 0; i < imgs.size(); i += step)
+    desc.push_back(sp::place::orb_descriptors(read_image(imgs[i].file), a.features));
+  spdlog::info("BoW: {} words from {} images", a.words, desc.size());
+  const auto voc = sp::place::BowVocabulary::train(desc, a.words, 8, a.seed);
+  voc.save(a.out);
+  spdlog::info("wrote {}", a.out.string());
+}
+
+}  // namespace
+
+void add_vpr_command(CLI::App& app) {
+  auto* vpr = app.add_subcommand("vpr", "ParC_NetVLAD place recognition: train, eval, bow-train");
+  vpr->require_subcommand(1);
+
+  auto ta = std::make_shared<TrainArgs>();
+  auto* train = vpr->add_subcommand("train", "train on dynsynth places folders");
+  train->add_option("--data", ta->o.data, "places folders (or folders of them)")->required()->expected(1, -1);
+  train->add_option("--out", ta->o.out, "model file to write")->required();
+  train->add_option("--variant", ta->variant)->check(CLI::IsMember({"small", "tiny"}))->capture_default_str();
+  train->add_option("--config", ta->config, "YAML model config (ModelConfig::from_yaml keys)");
+  train->add_option("--parc", ta->parc)->check(CLI::IsMember({"on", "off"}))->capture_default_str();
+  train->add_option("--cbam", ta->cbam)->check(CLI::IsMember({"on", "off"}))->capture_default_str();
+  train->add_option("--width-mult", ta->width_mult, "scale the variant's widths")
+      ->check(CLI::Range(0.05, 2.0));
+  train->add_option("--depth-mult", ta->depth_mult, "scale the variant's depths")
+      ->check(CLI::Range(0.1, 2.0));
+  train->add_option("--input-height", ta->input_h)->check(CLI::Range(32, 2048));
+  train->add_option("--input-width", ta->input_w)->check(CLI::Range(32, 2048));
+  train->add_option("--clusters", ta->clusters)->check(CLI::Range(2, 512));
+  train->add_option("--epochs", ta->o.epochs)->check(CLI::Range(1, 1000))->capture_default_str();
+  train->add_option("--lr", ta->o.lr)->check(CLI::Range(1e-7, 1.0))->capture_default_str();
+  train->add_option("--optimizer", ta->o.optimizer)
+      ->check(CLI::IsMember({"adam", "sgd"}))
+      ->capture_default_str();
+  train->add_option("--margin", ta->o.margin)->check(CLI::Range(0.0, 4.0))->capture_default_str();
+  train->add_option("--negatives", ta->o.negatives)->check(CLI::Range(1, 50))->capture_default_str();
+  train->add_option("--negative-pool", ta->o.negative_pool)
+      ->check(CLI::Range(1, 100000))
+      ->capture_default_str();
+  train->add_option("--queries-per-epoch", ta->o.queries_per_epoch)
+      ->check(CLI::Range(1, 1000000))
+      ->capture_default_str();
+  train->add_option("--batch", ta->o.batch)->check(CLI::Range(1, 256))->capture_default_str();
+  train->add_option("--refresh-every", ta->o.refresh_every, "queries between cache refreshes")
+      ->check(CLI::Range(1, 1000000))
+      ->capture_default_str();
+  train->add_option("--kmeans-images", ta->o.kmeans_images)
+      ->check(CLI::Range(1, 100000))
+      ->capture_default_str();
+  train->add_option("--seed", ta->o.seed)->capture_default_str();
+  train->add_option("--resume", ta->o.resume, "checkpoint (<out>.ckpt) to continue from");
+  train->add_option("--threads", ta->o.threads)->check(CLI::Range(1, 2))->capture_default_str();
+  train->add_flag("!--no-progress", ta->o.progress, "no progress bar");
+  train->callback([ta] { run_train(*ta); });
+
+  auto ea = std::make_shared<EvalArgs>();
+  auto* eval = vpr->add_subcommand("eval", "Recall@1/5/10/20 on a place-recognition set");
+  eval->add_option("--model", ea->model, "ParC_NetVLAD model file");
+  eval->add_option("--bow", ea->bow, "BoW vocabulary (from vpr bow-train) instead of a model");
+  eval->add_option("--dataset", ea->dataset, "nordland/, corridor/ or dynsynth places folder(s)")->required();
+  eval->add_option("--json", ea->json, "write the figures as JSON");
+  eval->add_option("--threads", ea->threads)->check(CLI::Range(1, 2))->capture_default_str();
+  eval->add_flag("!--no-progress", ea->progress, "no progress bar");
+  eval->callback([ea] { run_eval(*ea); });
+
+  auto ba = std::make_shared<BowArgs>();
+  auto* bow = vpr->add_subcommand("bow-train", "train the flat ORB vocabulary of the BoW baseline");
+  bow->add_option("--data", ba->data)->required()->expected(1, -1);
+  bow->add_option("--out", ba->out)->required();
+  bow->add_option("--words", ba->words)->check(CLI::Range(16, 100000))->capture_default_str();
+  bow->add_option("--images", ba->images)->check(CLI::Range(1, 100000))->capture_default_str();
+  bow->add_option("--seed", ba->seed)->capture_default_str();
+  bow->callback([ba] { run_bow_train(*ba); });
+}
+
+}  // namespace sp::app

@@ -1,0 +1,49 @@
+#pragma once
+// Training of ParC_NetVLAD on dynsynth `places` folders: triplet margin loss on squared L2 distances
+// with hard negatives mined from a periodically refreshed descriptor cache (NetVLAD-style).
+// Torch-free interface.
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "stillpoint/place/model_config.hpp"
+#include "stillpoint/place/retrieval.hpp"
+
+namespace sp::place {
+
+struct TrainOptions {
+  std::vector<std::filesystem::path> data;  // places folders, or folders of them
+  std::filesystem::path out;                // final model file; checkpoints go to <out>.ckpt*
+  ModelConfig model = ModelConfig::small();
+  PlaceRules rules;
+  int epochs = 8;                  // [1, 1000]
+  double lr = 1e-3;                // learning rate
+  std::string optimizer = "adam";  // adam | sgd (momentum 0.9)
+  double margin = 0.1;             // on squared L2 distances
+  int negatives = 5;               // hard negatives per query
+  int negative_pool = 400;         // random negatives scored per query to pick the hardest from
+  int queries_per_epoch = 320;     // sampled training queries per epoch
+  int batch = 4;                   // queries per step (each brings 1 + 1 + negatives images)
+  int refresh_every = 160;         // queries between descriptor-cache refreshes
+  int kmeans_images = 200;         // images whose features initialise the NetVLAD centroids
+  std::uint64_t seed = 1;          // torch::manual_seed and the mining RNG
+  std::filesystem::path resume;    // checkpoint to continue from (empty = start fresh)
+  int threads = 2;                 // libtorch intra-op threads
+  bool progress = true;            // progress bar
+};
+
+struct EpochStats {
+  int epoch = 0;
+  double loss = 0;    // mean triplet loss
+  double active = 0;  // fraction of (query, negative) pairs inside the margin
+  double seconds = 0;
+};
+
+// Trains (or resumes) and writes the final model to options.out. Returns per-epoch statistics.
+std::vector<EpochStats> train_model(const TrainOptions& options);
+
+// Loads and resizes every image of the given places folders (shared by training and tests).
+std::vector<PlaceImage> collect_places(const std::vector<std::filesystem::path>& dirs);
+
+}  // namespace sp::place
