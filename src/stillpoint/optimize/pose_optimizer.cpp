@@ -1,0 +1,119 @@
+#include "stillpoint/optimize/pose_optimizer.hpp"
+
+#include <Eigen/Cholesky>
+#include <cmath>
+
+namespace sp::opt {
+namespace {
+
+struct NormalEquations {
+  geo::Mat6 H = geo::Mat6::Zero();
+  geo::Vec6 g = geo::Vec6::Zero();
+  double cost = 0;
+  int used = 0;
+};
+
+struct Problem {
+  const std::vector<PoseObservation>& obs;
+  const std::vector<double>& sqrt_info;
+  const std::vector<bool>& outlier;
+  const CameraModel& cam;
+  double delta_mono, delta_stereo;
+  bool robust;
+};
+
+// Gauss-Newton normal equations of the (IRLS-weighted) robust cost at T over the inlier set.
+NormalEquations accumulate(const Problem& p, const geo::SE3& T, bool with_jacobian) {
+  NormalEquations ne;
+  const Eigen::Matrix3d R = T.rotation();
+  const Eigen::Vector3d& t = T.translation();
+  for (std::size_t i = 0; i < p.obs.size(); ++i) {
+    if (p.outlier[i]) continue;
+    const PoseObservation& o = p.obs[i];
+    const Reprojection rep =
+        evaluate_reprojection(p.cam, R, t, o.point_w, o.uv, o.u_right, p.sqrt_info[i], with_jacobian, false);
+    if (rep.depth <= 0) continue;
+    double w = 1.0;
+    const double chi2 = rep.chi2();
+    ne.cost += p.robust ? huber_cost(chi2, rep.dim == 2 ? p.delta_mono : p.delta_stereo, &w) : chi2;
+    ++ne.used;
+    if (!with_jacobian) continue;
+    // Unused rows of the monocular residual and Jacobian are zero, so 3 rows serve both cases.
+    ne.H.selfadjointView<Eigen::Upper>().rankUpdate(rep.J_pose.transpose(), w);
+    ne.g.noalias() += w * rep.J_pose.transpose() * rep.residual;
+  }
+  ne.H.triangularView<Eigen::StrictlyLower>() = ne.H.transpose();
+  return ne;
+}
+
+// Levenberg-Marquardt on the left increment of T (T <- exp(delta) T).
+void levenberg_marquardt(const Problem& p, geo::SE3& T, int iterations) {
+  NormalEquations ne = accumulate(p, T, true);
+  double lambda = 1e-4;
+  for (int it = 0; it < iterations; ++it) {
+    if (ne.used < 3) return;
+    geo::Mat6 A = ne.H;
+    A.diagonal() += lambda * ne.H.diagonal() + geo::Vec6::Constant(1e-12);
+    const geo::Vec6 delta = A.ldlt().solve(-ne.g);
+    if (!delta.allFinite()) return;
+    const geo::SE3 T_new = geo::SE3::exp(delta) * T;
+    NormalEquations ne_new = accumulate(p, T_new, true);
+    if (ne_new.used >= 3 && ne_new.cost < ne.cost) {
+      T = T_new;
+      ne = ne_new;
+      lambda = std::max(lambda * 0.1, 1e-9);
+      if (delta.squaredNorm() < 1e-20) return;
+    } else {
+      lambda *= 10.0;
+      if (lambda > 1e8) return;
+    }
+  }
+}
+
+}  // namespace
+
+PoseOptimizerConfig PoseOptimizerConfig::from_yaml(const ConfigReader& r) {
+  PoseOptimizerConfig c;
+  r.read("rounds", c.rounds, 1, 20);
+  r.read("iterations", c.iterations, 1, 100);
+  r.read("chi2_mono", c.chi2_mono, 0.1, 1000.0);
+  r.read("chi2_stereo", c.chi2_stereo, 0.1, 1000.0);
+  return c;
+}
+
+PoseOptimizationResult optimize_pose(geo::SE3& T_cw, const std::vector<PoseObservation>& observations,
+                                     const CameraModel& camera, const PoseOptimizerConfig& config) {
+  PoseOptimizationResult result;
+  const std::size_t n = observations.size();
+  result.outlier.assign(n, false);
+  if (n < 3) {
+    result.outlier.assign(n, true);
+    return result;
+  }
+  std::vector<double> sqrt_info(n);
+  for (std::size_t i = 0; i < n; ++i) sqrt_info[i] = std::sqrt(std::max(observations[i].inv_sigma2, 0.0));
+
+  Problem p{observations, sqrt_info, result.outlier, camera, std::sqrt(config.chi2_mono),
+            std::sqrt(config.chi2_stereo), true};
+  for (int round = 0; round < config.rounds; ++round) {
+    // The robust kernel is dropped in the last round: by then the outliers are out.
+    p.robust = round + 1 < config.rounds;
+    levenberg_marquardt(p, T_cw, config.iterations);
+
+    // Re-classify every observation, including last round's outliers (they may come back).
+    const Eigen::Matrix3d R = T_cw.rotation();
+    result.inliers = 0;
+    for (std::size_t i = 0; i < n; ++i) {
+      const PoseObservation& o = observations[i];
+      const Reprojection rep =
+          evaluate_reprojection(camera, R, T_cw.translation(), o.point_w, o.uv, o.u_right, sqrt_info[i], false, false);
+      const double threshold = rep.dim == 2 ? config.chi2_mono : config.chi2_stereo;
+      result.outlier[i] = rep.depth <= 0 || rep.chi2() > threshold;
+      if (!result.outlier[i]) ++result.inliers;
+    }
+    if (result.inliers < 10) break;  // too few to trust another round (as ORB-SLAM)
+  }
+  return result;
+}
+
+}  // namespace sp::opt

@@ -1,0 +1,117 @@
+#include "stillpoint/optimize/pose_optimizer.hpp"
+
+#include <gtest/gtest.h>
+
+#include "stillpoint/common/error.hpp"
+#include "synthetic.hpp"
+
+namespace sp::opt {
+namespace {
+
+struct Scene {
+  geo::SE3 T_gt;
+  std::vector<PoseObservation> obs;
+  std::vector<bool> gross;
+};
+
+Scene make_scene(int count, double outlier_ratio, unsigned seed) {
+  std::mt19937 rng(seed);
+  const CameraModel cam = test::test_camera();
+  Scene s;
+  s.T_gt = test::camera_pose(2);
+  std::normal_distribution<double> noise(0.0, 1.0);
+  std::uniform_real_distribution<double> u01(0.0, 1.0), offset(20.0, 80.0);
+  const std::vector<Eigen::Vector3d> pts = test::random_points(rng, count);
+  for (const Eigen::Vector3d& p : pts) {
+    const Eigen::Vector3d proj = project_stereo(cam, s.T_gt * p);
+    PoseObservation o;
+    o.point_w = p;
+    const int octave = static_cast<int>(u01(rng) * 4);
+    const double sigma = std::pow(1.2, octave);
+    o.inv_sigma2 = 1.0 / (sigma * sigma);
+    o.uv = proj.head<2>() + sigma * Eigen::Vector2d(noise(rng), noise(rng));
+    const bool stereo = u01(rng) < 0.5;
+    if (stereo) o.u_right = o.uv.x() - (proj.x() - proj.z()) + sigma * noise(rng);
+    const bool gross = u01(rng) < outlier_ratio;
+    if (gross) {
+      const double sx = u01(rng) < 0.5 ? -1 : 1, sy = u01(rng) < 0.5 ? -1 : 1;
+      o.uv += Eigen::Vector2d(sx * offset(rng), sy * offset(rng));
+      if (stereo) o.u_right = o.uv.x() - (proj.x() - proj.z());
+    }
+    s.obs.push_back(o);
+    s.gross.push_back(gross);
+  }
+  return s;
+}
+
+TEST(PoseOptimizer, RecoversPoseWithGrossOutliersAndFlagsThem) {
+  const Scene s = make_scene(600, 0.2, 5);
+  std::mt19937 rng(17);
+  geo::SE3 T = geo::SE3::exp(test::random_xi(rng, 0.05, 0.03)) * s.T_gt;
+  ASSERT_GT(test::position_error(T, s.T_gt), 0.02);
+  const PoseOptimizationResult res = optimize_pose(T, s.obs, test::test_camera(), PoseOptimizerConfig{});
+  // Noise-limited (1 px at 3-8 m depth): centimetre level, and the same minimum as a start at the truth.
+  EXPECT_LT(test::position_error(T, s.T_gt), 0.02);
+  EXPECT_LT(test::rotation_error(T, s.T_gt), 0.2 * M_PI / 180.0);
+  geo::SE3 T_from_truth = s.T_gt;
+  const PoseOptimizationResult res_truth =
+      optimize_pose(T_from_truth, s.obs, test::test_camera(), PoseOptimizerConfig{});
+  EXPECT_EQ(res_truth.outlier, res.outlier);
+  EXPECT_LT(test::position_error(T, T_from_truth), 1e-6);
+  ASSERT_EQ(res.outlier.size(), s.obs.size());
+  int gross = 0, gross_flagged = 0, clean = 0, clean_flagged = 0;
+  for (std::size_t i = 0; i < s.obs.size(); ++i) {
+    if (s.gross[i]) {
+      ++gross;
+      gross_flagged += res.outlier[i] ? 1 : 0;
+    } else {
+      ++clean;
+      clean_flagged += res.outlier[i] ? 1 : 0;
+    }
+  }
+  EXPECT_GT(gross, 80);
+  EXPECT_EQ(gross_flagged, gross);
+  // The 95 % chi-square test rejects about 5 % of clean observations.
+  EXPECT_LT(clean_flagged, clean / 10);
+  EXPECT_EQ(res.inliers, static_cast<int>(s.obs.size()) - gross_flagged - clean_flagged);
+}
+
+TEST(PoseOptimizer, ExactDataConvergesToTruth) {
+  Scene s = make_scene(100, 0.0, 8);
+  // Replace the noisy measurements by exact projections.
+  const CameraModel cam = test::test_camera();
+  for (PoseObservation& o : s.obs) {
+    const Eigen::Vector3d proj = project_stereo(cam, s.T_gt * o.point_w);
+    o.uv = proj.head<2>();
+    if (o.u_right >= 0) o.u_right = proj.z();
+  }
+  std::mt19937 rng(2);
+  geo::SE3 T = geo::SE3::exp(test::random_xi(rng, 0.1, 0.05)) * s.T_gt;
+  const PoseOptimizationResult res = optimize_pose(T, s.obs, cam, PoseOptimizerConfig{});
+  EXPECT_EQ(res.inliers, 100);
+  EXPECT_LT(test::position_error(T, s.T_gt), 1e-8);
+  EXPECT_LT(test::rotation_error(T, s.T_gt), 1e-9);
+}
+
+TEST(PoseOptimizer, TooFewObservationsLeavesPoseUnchanged) {
+  const Scene s = make_scene(2, 0.0, 1);
+  geo::SE3 T = test::camera_pose(1);
+  const Eigen::Matrix4d before = T.matrix();
+  const PoseOptimizationResult res = optimize_pose(T, s.obs, test::test_camera(), PoseOptimizerConfig{});
+  EXPECT_EQ(res.inliers, 0);
+  EXPECT_EQ(res.outlier, std::vector<bool>(2, true));
+  EXPECT_EQ(T.matrix(), before);
+}
+
+TEST(PoseOptimizer, ConfigFromYaml) {
+  const auto r = ConfigReader::from_string("rounds: 3\nchi2_mono: 4.5\n", "test.yaml");
+  const PoseOptimizerConfig c = PoseOptimizerConfig::from_yaml(r);
+  EXPECT_EQ(c.rounds, 3);
+  EXPECT_DOUBLE_EQ(c.chi2_mono, 4.5);
+  EXPECT_EQ(c.iterations, 10);
+  const auto bad = ConfigReader::from_string("rounds: 0\n", "bad.yaml");
+  EXPECT_THROW(PoseOptimizerConfig::from_yaml(bad), ConfigError);
+}
+
+}  // namespace
+}  // namespace sp::opt
