@@ -1,0 +1,5 @@
+#include "stillpoint/io/frame_source.hpp"
+
+namespace sp::io {
+FrameSource::~FrameSource() = default;
+}  // namespace sp::io
