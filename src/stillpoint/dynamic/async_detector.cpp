@@ -1,0 +1,101 @@
+#include "stillpoint/dynamic/async_detector.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include "stillpoint/dynamic/yolo_detector.hpp"
+
+namespace sp::dyn {
+
+AsyncDetector::AsyncDetector(DetectFn detect, Mode mode) : detect_(std::move(detect)), mode_(mode) {
+  if (mode_ == Mode::kAsync) worker_ = std::thread([this] { run(); });
+}
+
+AsyncDetector::AsyncDetector(const DetectorConfig& cfg, Mode mode)
+    : AsyncDetector(
+          [det = std::make_shared<YoloDetector>(cfg)](const cv::Mat& bgr) { return det->detect(bgr); },
+          mode) {}
+
+AsyncDetector::~AsyncDetector() { stop(); }
+
+void AsyncDetector::submit(std::size_t frame_index, double stamp, const cv::Mat& bgr) {
+  rethrow_worker_error();
+  {
+    std::lock_guard lock(mutex_);
+    if (stopped_) return;
+  }
+  if (mode_ == Mode::kSync) {
+    Detections d = detect_(bgr);
+    d.frame_index = frame_index;
+    d.stamp = stamp;
+    store(std::move(d));
+    return;
+  }
+  if (queue_.push_drop_oldest(Job{frame_index, stamp, bgr.clone()})) {
+    std::lock_guard lock(mutex_);
+    ++dropped_;
+  }
+}
+
+std::optional<Detections> AsyncDetector::latest() const {
+  std::lock_guard lock(mutex_);
+  return latest_;
+}
+
+std::optional<Detections> AsyncDetector::wait_for(std::size_t frame_index, std::chrono::milliseconds budget) {
+  rethrow_worker_error();
+  std::unique_lock lock(mutex_);
+  done_.wait_for(lock, budget,
+                 [&] { return stopped_ || error_ || (latest_ && latest_->frame_index >= frame_index); });
+  return latest_;
+}
+
+void AsyncDetector::stop() {
+  {
+    std::lock_guard lock(mutex_);
+    stopped_ = true;
+  }
+  queue_.close();
+  while (queue_.try_pop()) {
+  }
+  if (worker_.joinable()) worker_.join();
+  done_.notify_all();
+}
+
+std::size_t AsyncDetector::dropped() const {
+  std::lock_guard lock(mutex_);
+  return dropped_;
+}
+
+void AsyncDetector::run() {
+  while (auto job = queue_.pop()) {
+    try {
+      Detections d = detect_(job->image);
+      d.frame_index = job->frame_index;
+      d.stamp = job->stamp;
+      store(std::move(d));
+    } catch (...) {
+      spdlog::error("detector thread: detection of frame {} failed", job->frame_index);
+      std::lock_guard lock(mutex_);
+      error_ = std::current_exception();
+      done_.notify_all();
+    }
+  }
+}
+
+void AsyncDetector::store(Detections d) {
+  std::lock_guard lock(mutex_);
+  // Results arrive in submission order; never let an older one replace a newer one.
+  if (!latest_ || d.frame_index >= latest_->frame_index) latest_ = std::move(d);
+  done_.notify_all();
+}
+
+void AsyncDetector::rethrow_worker_error() {
+  std::exception_ptr e;
+  {
+    std::lock_guard lock(mutex_);
+    e = std::exchange(error_, nullptr);
+  }
+  if (e) std::rethrow_exception(e);
+}
+
+}  // namespace sp::dyn

@@ -1,0 +1,73 @@
+#pragma once
+// Runs a detector in its own thread on the newest submitted frame, so tracking never waits for
+// the network longer than it chooses to (wait_for's budget).
+#include <chrono>
+#include <condition_variable>
+#include <exception>
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <opencv2/core.hpp>
+#include <optional>
+#include <thread>
+
+#include "stillpoint/common/bounded_queue.hpp"
+#include "stillpoint/dynamic/detection.hpp"
+
+namespace sp::dyn {
+
+class AsyncDetector {
+ public:
+  using DetectFn = std::function<Detections(const cv::Mat& bgr)>;
+  enum class Mode { kAsync, kSync };  // kSync: submit() detects in the caller's thread (deterministic)
+
+  // Wraps any detection function (tests, other detectors); frame_index/stamp are filled in here.
+  AsyncDetector(DetectFn detect, Mode mode);
+  // Builds a YoloDetector in the caller's thread (load errors throw here, not in the worker).
+  AsyncDetector(const DetectorConfig& cfg, Mode mode);
+  ~AsyncDetector();
+  AsyncDetector(const AsyncDetector&) = delete;
+  AsyncDetector& operator=(const AsyncDetector&) = delete;
+
+  // Never blocks in kAsync mode: the image is copied and, when the worker is busy, replaces any
+  // frame still waiting (only the newest is kept). Ignored after stop(). Rethrows a detector error
+  // raised in the worker.
+  void submit(std::size_t frame_index, double stamp, const cv::Mat& bgr);
+
+  // The most recent finished detection (of any frame), if any.
+  [[nodiscard]] std::optional<Detections> latest() const;
+
+  // Waits at most `budget` until the detection of `frame_index` (or a newer frame) is done, then
+  // returns the latest available one (possibly older; nullopt if none finished yet).
+  std::optional<Detections> wait_for(std::size_t frame_index, std::chrono::milliseconds budget);
+
+  // Finishes the frame in progress (cv::dnn cannot be interrupted), drops pending ones and joins.
+  // Idempotent; the destructor calls it.
+  void stop();
+
+  // Frames submitted but replaced before the worker took them.
+  [[nodiscard]] std::size_t dropped() const;
+
+ private:
+  struct Job {
+    std::size_t frame_index = 0;
+    double stamp = 0;
+    cv::Mat image;
+  };
+  void run();
+  void store(Detections d);
+  void rethrow_worker_error();
+
+  DetectFn detect_;
+  Mode mode_;
+  BoundedQueue<Job> queue_{1};
+  mutable std::mutex mutex_;
+  std::condition_variable done_;
+  std::optional<Detections> latest_;
+  std::exception_ptr error_;
+  std::size_t dropped_ = 0;
+  bool stopped_ = false;
+  std::thread worker_;
+};
+
+}  // namespace sp::dyn

@@ -1,0 +1,116 @@
+#pragma once
+// Dynamic feature culling: decides which detected objects actually move (sparse LK flow with the
+// camera's own motion compensated) and marks the keypoints on them, before pose estimation.
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+#include <cstddef>
+#include <deque>
+#include <opencv2/core.hpp>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "stillpoint/common/config_reader.hpp"
+#include "stillpoint/dynamic/detection.hpp"
+
+namespace sp::dyn {
+
+enum class CullMode {
+  kOff,           // nothing is culled
+  kDetectorOnly,  // every box of a dynamic class is culled, no motion check (ablation)
+  kFlowOnly,      // no boxes: clusters of moving points are culled (ablation)
+  kDetectorFlow,  // boxes culled only when the motion check says they move (the method)
+};
+CullMode parse_cull_mode(const std::string& s);  // off | detector_only | flow_only | detector_flow
+const char* to_string(CullMode m);
+
+struct MotionCheckConfig {
+  CullMode mode = CullMode::kDetectorFlow;
+  // Residual used to call a point moving: "auto" = reprojection when depth and K are given (camera
+  // motion from PnP-RANSAC on the flow, predicted pose as its initial guess), else epipolar.
+  std::string residual = "auto";         // auto | epipolar | reprojection
+  int lk_window = 21;                    // px, LK window side [5, 61]
+  int lk_levels = 3;                     // pyramid levels above the base [0, 6]
+  int max_points = 300;                  // tracked points per frame (keypoints bucketed on a grid) [20, 5000]
+  int grid_cell_px = 24;                 // bucketing cell for picking tracked points [4, 200]
+  double fb_max_px = 1.0;                // forward-backward LK error above which a track is dropped [0.1, 10]
+  double epsilon_epipolar_px = 1.0;      // epipolar distance above which a point moves [0.1, 20]
+  double epsilon_reprojection_px = 2.0;  // reprojection residual above which a point moves [0.1, 50]
+  double ransac_threshold_px = 1.0;      // F-matrix / PnP RANSAC inlier threshold [0.1, 20]
+  double ransac_confidence = 0.99;       // [0.5, 0.9999]
+  int ransac_iterations = 200;           // PnP RANSAC iterations [10, 10000]
+  int min_static_points = 15;  // fewer points outside boxes: ego-motion is fitted on all points [8, 1000]
+  double moving_ratio_threshold = 0.3;  // share of moving points that makes a box dynamic [0, 1]
+  int min_points_to_decide = 5;         // fewer tracked points in a box: undecided [1, 1000]
+  std::vector<std::string> always_dynamic_classes = {"person"};  // undecided boxes of these are dynamic
+  int dynamic_hold_frames = 10;  // a box that moved stays dynamic this many frames (people pause) [0, 1000]
+  bool keep_background_in_box = true;      // keypoints much deeper than the object in its box are kept
+  double background_depth_margin_m = 0.5;  // "much deeper": > object depth + margin, metres [0.05, 10]
+  bool cull_unboxed_movers = true;         // moving point clusters outside boxes are culled too
+  double unboxed_radius_px = 12.0;         // keypoints this close to a confirmed mover are culled [1, 200]
+  double cluster_radius_px = 40.0;         // a mover is confirmed with >= cluster_min_points movers this near
+  int cluster_min_points = 3;              // [1, 100] (counting itself)
+  double box_margin_px = 4.0;              // boxes are grown by this for keypoint tests [0, 100]
+  int max_history_frames = 10;             // flow history for carrying late detections forward [1, 100]
+
+  static MotionCheckConfig from_yaml(const ConfigReader& r);
+};
+
+struct DynamicInput {
+  std::size_t frame_index = 0;         // increasing frame counter (matches Detections::frame_index)
+  const cv::Mat* prev_gray = nullptr;  // CV_8UC1 previous frame; null/empty on the first frame
+  const cv::Mat* gray = nullptr;       // CV_8UC1 current frame (required)
+  const cv::Mat* depth = nullptr;      // CV_32F metres of the current frame (0 / NaN = none), or null
+  const std::vector<cv::KeyPoint>* keypoints = nullptr;  // current frame's keypoints (pixels), or null
+  const Detections* detections = nullptr;                // may be null or from an earlier frame
+  std::optional<Eigen::Matrix3d> K;  // pinhole intrinsics (needed for the reprojection residual)
+  std::optional<Eigen::Isometry3d> T_cur_prev_predicted;  // predicted camera motion prev -> cur
+};
+
+struct DynamicResult {
+  std::vector<bool> keypoint_dynamic;    // per input keypoint
+  std::vector<Detection> boxes;          // detections carried to the current frame
+  std::vector<bool> box_dynamic;         // per box
+  std::vector<cv::Point2f> flow_points;  // tracked points in the current frame
+  std::vector<cv::Point2f> flow_prev;    // their positions in the previous frame
+  std::vector<float> flow_residual;      // px; negative = no residual (e.g. no depth)
+  std::vector<bool> flow_point_moving;
+  std::string residual_used;  // "epipolar", "reprojection" or "none"
+  int ego_inliers = 0;        // RANSAC inliers of the camera-motion fit
+  int culled = 0;             // keypoints marked dynamic
+  double ms = 0;              // wall time of process()
+};
+
+class DynamicFeatureFilter {
+ public:
+  explicit DynamicFeatureFilter(const MotionCheckConfig& cfg,
+                                const std::vector<std::string>& class_names = coco_class_names());
+
+  // One call per frame, in frame order. Throws sp::Error on inconsistent input (sizes, types).
+  DynamicResult process(const DynamicInput& in);
+
+  // Forgets the flow history and the dynamic-box memory (after a reset / relocalisation).
+  void reset();
+
+  [[nodiscard]] const MotionCheckConfig& config() const noexcept { return cfg_; }
+
+ private:
+  struct FlowStep {               // the tracked pairs of one frame step (prev -> cur), for carrying boxes
+    std::size_t frame_index = 0;  // the "cur" frame of the step
+    std::vector<cv::Point2f> prev, cur;
+  };
+  struct Memory {  // a box that was dynamic recently
+    cv::Rect2f box;
+    int class_id = 0;
+    std::size_t last_dynamic_frame = 0;
+  };
+
+  std::vector<Detection> carry_boxes(const Detections& d, std::size_t to_frame) const;
+
+  MotionCheckConfig cfg_;
+  std::vector<bool> always_dynamic_;  // class id -> always dynamic
+  std::deque<FlowStep> history_;
+  std::vector<Memory> memory_;
+};
+
+}  // namespace sp::dyn

@@ -1,0 +1,110 @@
+// The shipped test models find the people in real photos and nobody in the negatives.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <map>
+#include <opencv2/imgcodecs.hpp>
+
+#include "stillpoint/common/error.hpp"
+#include "stillpoint/dynamic/yolo_detector.hpp"
+
+namespace sp::dyn {
+namespace {
+
+const std::filesystem::path kModels = SP_SHARED_DIR "/models";
+const std::filesystem::path kPeople = SP_SHARED_DIR "/data/people";
+
+struct Expect {
+  const char* file;
+  int lo, hi;  // accepted person count (by-eye counts of data/people/README.md, with slack)
+};
+
+// By-eye counts with slack: the tiny models miss one or two of the four bus passengers (measured:
+// YOLOX-nano 3, Yolo-Fastest 2, body 3), and messi5's blurred crowd adds legitimate persons (3-7).
+const Expect kImages[] = {{"yolov5_bus.jpg", 2, 6},
+                          {"yolov5_zidane.jpg", 2, 3},
+                          {"darknet_person.jpg", 1, 1},
+                          {"opencv_messi5.jpg", 1, 10},
+                          {"opencv_basketball1.png", 1, 4},
+                          {"opencv_basketball2.png", 1, 4},
+                          {"neg_darknet_dog.jpg", 0, 0},
+                          {"neg_darknet_horses.jpg", 0, 0},
+                          {"neg_opencv_hfs_000_bird.jpg", 0, 0},
+                          {"neg_opencv_hfs_001_lake.jpg", 0, 0}};
+
+void check_model(const std::filesystem::path& model) {
+  if (!std::filesystem::exists(model) || !std::filesystem::exists(kPeople)) GTEST_SKIP() << "no " << model;
+  YoloDetector det(DetectorConfig::for_model(model));
+  for (const auto& e : kImages) {
+    const cv::Mat img = cv::imread((kPeople / e.file).string(), cv::IMREAD_COLOR);
+    ASSERT_FALSE(img.empty()) << e.file;
+    const Detections d = det.detect(img);
+    int persons = 0;
+    for (const auto& it : d.items) {
+      EXPECT_EQ(it.class_id, 0);  // only the dynamic class (person) is reported
+      EXPECT_GE(it.box.x, 0.f);
+      EXPECT_LE(it.box.x + it.box.width, static_cast<float>(img.cols) + 1e-3f);
+      EXPECT_LE(it.box.y + it.box.height, static_cast<float>(img.rows) + 1e-3f);
+      ++persons;
+    }
+    EXPECT_GE(persons, e.lo) << model.filename() << " " << e.file;
+    EXPECT_LE(persons, e.hi) << model.filename() << " " << e.file;
+  }
+}
+
+TEST(YoloDetector, YoloxNanoFindsPeople) { check_model(kModels / "yolox_nano.onnx"); }
+TEST(YoloDetector, YoloFastestFindsPeople) { check_model(kModels / "yolo-fastest-1.1.cfg"); }
+TEST(YoloDetector, YoloFastestBodyFindsPeople) { check_model(kModels / "yolo-fastest-1.1_body.cfg"); }
+
+TEST(YoloDetector, PersonBoxInDarknetPhotoIsWhereThePersonIs) {
+  const auto model = kModels / "yolox_nano.onnx";
+  if (!std::filesystem::exists(model)) GTEST_SKIP();
+  YoloDetector det(DetectorConfig::for_model(model));
+  const cv::Mat img = cv::imread((kPeople / "darknet_person.jpg").string());
+  ASSERT_FALSE(img.empty());
+  const auto d = det.detect(img);
+  ASSERT_EQ(d.items.size(), 1u);
+  // The person stands right of centre in the 640x424 photo, roughly x 190-275, y 95-380 (by eye).
+  const cv::Rect2f& b = d.items[0].box;
+  EXPECT_NEAR(b.x + b.width / 2, 232, 40);
+  EXPECT_GT(b.height, 200);
+  EXPECT_EQ(det.decoder(), "yolox");
+}
+
+TEST(YoloDetector, MissingModelNamesTheFile) {
+  DetectorConfig cfg;
+  cfg.model = "/nonexistent/model.onnx";
+  try {
+    YoloDetector det(cfg);
+    FAIL() << "no throw";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("/nonexistent/model.onnx"), std::string::npos);
+  }
+  EXPECT_THROW(DetectorConfig::for_model("/nonexistent/x.cfg"), Error);
+}
+
+TEST(YoloDetector, ConfigFromModelPathAndYaml) {
+  const auto cfgfile = kModels / "yolo-fastest-1.1.cfg";
+  if (!std::filesystem::exists(cfgfile)) GTEST_SKIP();
+  const DetectorConfig c = DetectorConfig::for_model(cfgfile);
+  EXPECT_EQ(c.decoder, "darknet");
+  EXPECT_EQ(c.input_width, 320);
+  EXPECT_FALSE(c.letterbox);
+  EXPECT_TRUE(c.swap_rb);
+  EXPECT_EQ(std::filesystem::path(c.weights).filename(), "yolo-fastest-1.1.weights");
+  const auto r = ConfigReader::from_string("model: " + (kModels / "yolox_nano.onnx").string() +
+                                               "\nconf_threshold: 0.5\ndynamic_classes: [person, dog]\n",
+                                           "test.yaml");
+  const DetectorConfig y = DetectorConfig::from_yaml(r);
+  r.finish();
+  EXPECT_EQ(y.decoder, "yolox");
+  EXPECT_FLOAT_EQ(y.conf_threshold, 0.5f);
+  EXPECT_EQ(y.dynamic_classes.size(), 2u);
+  EXPECT_THROW(DetectorConfig::from_yaml(ConfigReader::from_string("decoder: yolov9\n", "t.yaml")),
+               ConfigError);
+  EXPECT_THROW(DetectorConfig::from_yaml(ConfigReader::from_string("dynamic_classes: [ghost]\n", "t.yaml")),
+               ConfigError);
+}
+
+}  // namespace
+}  // namespace sp::dyn
