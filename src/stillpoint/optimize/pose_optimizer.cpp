@@ -59,10 +59,12 @@ void levenberg_marquardt(const Problem& p, geo::SE3& T, int iterations) {
     const geo::SE3 T_new = geo::SE3::exp(delta) * T;
     NormalEquations ne_new = accumulate(p, T_new, true);
     if (ne_new.used >= 3 && ne_new.cost < ne.cost) {
+      const double decrease = ne.cost - ne_new.cost;
       T = T_new;
       ne = ne_new;
       lambda = std::max(lambda * 0.1, 1e-9);
-      if (delta.squaredNorm() < 1e-20) return;
+      // Converged: a negligible step or cost change (saves most iterations of later rounds).
+      if (delta.squaredNorm() < 1e-16 || decrease < 1e-8 * ne.cost) return;
     } else {
       lambda *= 10.0;
       if (lambda > 1e8) return;
