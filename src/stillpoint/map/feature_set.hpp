@@ -1,0 +1,46 @@
+#pragma once
+// The features of one image: what a Frame has and what a Keyframe keeps.
+#include <opencv2/core.hpp>
+#include <vector>
+
+#include "stillpoint/geometry/camera.hpp"
+
+namespace sp::map {
+
+// Pyramid constants the matchers need; copied from the extractor so map data stays self-contained.
+struct ScalePyramid {
+  int levels = 8;
+  double scale_factor = 1.2;
+  std::vector<double> scale;             // scale[l] = scale_factor^l
+  std::vector<double> inv_level_sigma2;  // 1 / scale[l]^2
+  static ScalePyramid make(int levels, double scale_factor);
+};
+
+struct FeatureSet {
+  std::vector<cv::KeyPoint> keypoints;  // undistorted positions; octave, angle as extracted
+  cv::Mat descriptors;                  // N x 32, CV_8U
+  std::vector<float> depth;             // metres at the keypoint, <= 0 when invalid
+  std::vector<float> u_right;           // virtual stereo coordinate u - bf/depth, < 0 when invalid
+
+  [[nodiscard]] std::size_t size() const { return keypoints.size(); }
+  // Keeps only the features whose flag is false (used to drop dynamic features).
+  void remove_if(const std::vector<bool>& drop);
+};
+
+// Uniform grid over an image for "features near (u, v)" queries.
+class FeatureIndex {
+ public:
+  FeatureIndex() = default;
+  FeatureIndex(const std::vector<cv::KeyPoint>& keypoints, int width, int height);
+  [[nodiscard]] std::vector<int> in_area(double u, double v, double radius, int min_level = -1,
+                                         int max_level = -1) const;
+
+ private:
+  static constexpr int kCell = 10;  // px
+  int cols_ = 0, rows_ = 0;
+  std::vector<cv::Point2f> points_;  // own copy: the index stays valid when its owner moves
+  std::vector<int> levels_;
+  std::vector<std::vector<int>> cells_;
+};
+
+}  // namespace sp::map

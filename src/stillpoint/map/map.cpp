@@ -1,0 +1,328 @@
+#include "stillpoint/map/map.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+#include "stillpoint/common/error.hpp"
+
+namespace sp::map {
+
+namespace {
+int descriptor_distance(const cv::Mat& a, const cv::Mat& b) {
+  return static_cast<int>(cv::norm(a, b, cv::NORM_HAMMING));
+}
+}  // namespace
+
+int MapPoint::predict_level(double distance, const ScalePyramid& pyramid) const {
+  if (distance <= 0 || max_distance <= 0) return 0;
+  const double ratio = max_distance / distance;
+  const int level = static_cast<int>(std::ceil(std::log(ratio) / std::log(pyramid.scale_factor)));
+  return std::clamp(level, 0, pyramid.levels - 1);
+}
+
+MapView::MapView(Map& map) : map_(map), lock_(map.mutex_) {}
+
+Keyframe* MapView::keyframe(KeyframeId id) {
+  auto it = map_.keyframes_.find(id);
+  return it == map_.keyframes_.end() ? nullptr : &it->second;
+}
+
+MapPoint* MapView::point(PointId id) {
+  auto it = map_.points_.find(id);
+  return it == map_.points_.end() ? nullptr : &it->second;
+}
+
+MapPoint* MapView::live_point(PointId id) {
+  for (int hops = 0; hops < 8 && id != kNoPoint; ++hops) {
+    MapPoint* p = point(id);
+    if (p == nullptr) return nullptr;
+    if (!p->bad) return p;
+    id = p->replaced_by;
+  }
+  return nullptr;
+}
+
+KeyframeId MapView::add_keyframe(Keyframe kf) {
+  kf.id = map_.next_keyframe_id_++;
+  if (kf.points.size() != kf.features.size()) kf.points.assign(kf.features.size(), kNoPoint);
+  const KeyframeId id = kf.id;
+  auto [it, inserted] = map_.keyframes_.emplace(id, std::move(kf));
+  (void)inserted;
+  Keyframe& stored = it->second;
+  for (std::size_t i = 0; i < stored.points.size(); ++i) {
+    if (stored.points[i] == kNoPoint) continue;
+    MapPoint* p = live_point(stored.points[i]);
+    if (p == nullptr) {
+      stored.points[i] = kNoPoint;
+      continue;
+    }
+    stored.points[i] = p->id;
+    if (p->observations.contains(id)) {
+      stored.points[i] = kNoPoint;  // one feature per point per keyframe
+      continue;
+    }
+    p->observations[id] = static_cast<int>(i);
+  }
+  return id;
+}
+
+PointId MapView::add_point(MapPoint p) {
+  p.id = map_.next_point_id_++;
+  const PointId id = p.id;
+  map_.points_.emplace(id, std::move(p));
+  return id;
+}
+
+void MapView::add_observation(PointId pid, KeyframeId kid, int feature) {
+  MapPoint* p = point(pid);
+  Keyframe* kf = keyframe(kid);
+  if (p == nullptr || kf == nullptr || feature < 0 ||
+      static_cast<std::size_t>(feature) >= kf->points.size()) {
+    throw Error("map: add_observation with an unknown point, keyframe or feature");
+  }
+  if (p->observations.contains(kid)) return;
+  p->observations[kid] = feature;
+  kf->points[static_cast<std::size_t>(feature)] = pid;
+}
+
+void MapView::erase_observation(PointId pid, KeyframeId kid) {
+  MapPoint* p = point(pid);
+  Keyframe* kf = keyframe(kid);
+  if (p == nullptr) return;
+  auto it = p->observations.find(kid);
+  if (it == p->observations.end()) return;
+  if (kf != nullptr && static_cast<std::size_t>(it->second) < kf->points.size() &&
+      kf->points[static_cast<std::size_t>(it->second)] == pid) {
+    kf->points[static_cast<std::size_t>(it->second)] = kNoPoint;
+  }
+  p->observations.erase(it);
+  if (p->reference == kid && !p->observations.empty()) p->reference = p->observations.begin()->first;
+  // RGB-D points are created from one view, so a point needs at least one observation to live.
+  if (p->observations.empty()) erase_point(pid);
+}
+
+void MapView::erase_point(PointId pid) {
+  MapPoint* p = point(pid);
+  if (p == nullptr || p->bad) return;
+  p->bad = true;
+  for (const auto& [kid, feature] : p->observations) {
+    Keyframe* kf = keyframe(kid);
+    if (kf != nullptr && static_cast<std::size_t>(feature) < kf->points.size() &&
+        kf->points[static_cast<std::size_t>(feature)] == pid) {
+      kf->points[static_cast<std::size_t>(feature)] = kNoPoint;
+    }
+  }
+  p->observations.clear();
+}
+
+void MapView::replace_point(PointId old_id, PointId by) {
+  if (old_id == by) return;
+  MapPoint* old_p = point(old_id);
+  MapPoint* new_p = point(by);
+  if (old_p == nullptr || new_p == nullptr || old_p->bad || new_p->bad) return;
+  const auto observations = old_p->observations;
+  old_p->observations.clear();
+  old_p->bad = true;
+  old_p->replaced_by = by;
+  for (const auto& [kid, feature] : observations) {
+    Keyframe* kf = keyframe(kid);
+    if (kf == nullptr) continue;
+    auto& slot = kf->points[static_cast<std::size_t>(feature)];
+    if (!new_p->observations.contains(kid)) {
+      new_p->observations[kid] = feature;
+      slot = by;
+    } else {
+      slot = kNoPoint;
+    }
+  }
+  new_p->visible += old_p->visible;
+  new_p->found += old_p->found;
+  update_point_descriptor(by);
+}
+
+void MapView::update_point_descriptor(PointId pid) {
+  MapPoint* p = point(pid);
+  if (p == nullptr || p->bad || p->observations.empty()) return;
+  std::vector<cv::Mat> descs;
+  for (const auto& [kid, feature] : p->observations) {
+    const Keyframe* kf = keyframe(kid);
+    if (kf == nullptr || kf->bad) continue;
+    descs.push_back(kf->features.descriptors.row(feature));
+  }
+  if (descs.empty()) return;
+  // The representative descriptor has the least median distance to the others.
+  std::size_t best = 0;
+  int best_median = std::numeric_limits<int>::max();
+  for (std::size_t i = 0; i < descs.size(); ++i) {
+    std::vector<int> d;
+    for (std::size_t j = 0; j < descs.size(); ++j) d.push_back(descriptor_distance(descs[i], descs[j]));
+    std::nth_element(d.begin(), d.begin() + static_cast<long>((d.size() - 1) / 2), d.end());
+    const int median = d[(d.size() - 1) / 2];
+    if (median < best_median) {
+      best_median = median;
+      best = i;
+    }
+  }
+  p->descriptor = descs[best].clone();
+}
+
+void MapView::update_point_normal_and_depth(PointId pid, const ScalePyramid& pyramid) {
+  MapPoint* p = point(pid);
+  if (p == nullptr || p->bad || p->observations.empty()) return;
+  Eigen::Vector3d normal = Eigen::Vector3d::Zero();
+  int n = 0;
+  for (const auto& [kid, feature] : p->observations) {
+    const Keyframe* kf = keyframe(kid);
+    if (kf == nullptr) continue;
+    normal += (p->position - kf->camera_center()).normalized();
+    ++n;
+  }
+  const Keyframe* ref = keyframe(p->reference);
+  if (n == 0 || ref == nullptr) return;
+  p->normal = normal.normalized();
+  const double dist = (p->position - ref->camera_center()).norm();
+  const int level =
+      ref->features.keypoints[static_cast<std::size_t>(p->observations.at(p->reference))].octave;
+  const double level_scale =
+      pyramid.scale[static_cast<std::size_t>(std::clamp(level, 0, pyramid.levels - 1))];
+  p->max_distance = dist * level_scale;
+  p->min_distance = p->max_distance / pyramid.scale.back();
+}
+
+void MapView::update_connections(KeyframeId kid, int min_weight) {
+  Keyframe* kf = keyframe(kid);
+  if (kf == nullptr || kf->bad) return;
+  std::map<KeyframeId, int> counter;
+  for (PointId pid : kf->points) {
+    const MapPoint* p = pid == kNoPoint ? nullptr : point(pid);
+    if (p == nullptr || p->bad) continue;
+    for (const auto& [other, feature] : p->observations) {
+      if (other != kid) ++counter[other];
+    }
+  }
+  // Drop old back edges, then add the new ones.
+  for (const auto& [other, w] : kf->covisibility) {
+    if (Keyframe* o = keyframe(other)) o->covisibility.erase(kid);
+  }
+  kf->covisibility.clear();
+  KeyframeId best = kNoKeyframe;
+  int best_weight = 0;
+  for (const auto& [other, w] : counter) {
+    Keyframe* o = keyframe(other);
+    if (o == nullptr || o->bad) continue;
+    if (w > best_weight) {
+      best_weight = w;
+      best = other;
+    }
+    if (w >= min_weight) {
+      kf->covisibility[other] = w;
+      o->covisibility[kid] = w;
+    }
+  }
+  // Always keep the strongest link so no keyframe is left unconnected.
+  if (best != kNoKeyframe && kf->covisibility.empty()) {
+    kf->covisibility[best] = best_weight;
+    keyframe(best)->covisibility[kid] = best_weight;
+  }
+  if (kf->parent == kNoKeyframe && best != kNoKeyframe && best < kid) {
+    kf->parent = best;
+    keyframe(best)->children.insert(kid);
+  }
+}
+
+std::vector<KeyframeId> MapView::best_covisibles(KeyframeId kid, std::size_t n) const {
+  const auto it = map_.keyframes_.find(kid);
+  if (it == map_.keyframes_.end()) return {};
+  std::vector<std::pair<int, KeyframeId>> v;
+  for (const auto& [other, w] : it->second.covisibility) v.emplace_back(w, other);
+  // Ties broken by id so the order is deterministic.
+  std::sort(v.begin(), v.end(), [](const auto& a, const auto& b) {
+    return a.first != b.first ? a.first > b.first : a.second < b.second;
+  });
+  std::vector<KeyframeId> out;
+  for (std::size_t i = 0; i < v.size() && i < n; ++i) out.push_back(v[i].second);
+  return out;
+}
+
+std::vector<KeyframeId> MapView::covisibles_with_weight(KeyframeId kid, int min_weight) const {
+  std::vector<KeyframeId> out;
+  for (KeyframeId o : best_covisibles(kid, std::numeric_limits<std::size_t>::max())) {
+    if (map_.keyframes_.at(kid).covisibility.at(o) >= min_weight) out.push_back(o);
+  }
+  return out;
+}
+
+int MapView::tracked_points(KeyframeId kid, int min_observations) const {
+  const auto it = map_.keyframes_.find(kid);
+  if (it == map_.keyframes_.end()) return 0;
+  int n = 0;
+  for (PointId pid : it->second.points) {
+    if (pid == kNoPoint) continue;
+    const auto pit = map_.points_.find(pid);
+    if (pit == map_.points_.end() || pit->second.bad) continue;
+    if (static_cast<int>(pit->second.observations.size()) >= min_observations) ++n;
+  }
+  return n;
+}
+
+void MapView::erase_keyframe(KeyframeId kid) {
+  Keyframe* kf = keyframe(kid);
+  if (kf == nullptr || kf->bad || kf->parent == kNoKeyframe) return;  // the root keyframe stays
+  for (const auto& [other, w] : kf->covisibility) {
+    if (Keyframe* o = keyframe(other)) o->covisibility.erase(kid);
+  }
+  for (std::size_t i = 0; i < kf->points.size(); ++i) {
+    if (kf->points[i] != kNoPoint) erase_observation(kf->points[i], kid);
+  }
+  kf->T_c_parent = kf->T_cw * keyframe(kf->parent)->T_cw.inverse();
+  // Re-parent children to the parent's side: each child takes its best covisible keyframe that is
+  // already in the tree, falling back to this keyframe's parent.
+  const KeyframeId parent = kf->parent;
+  const auto children = kf->children;
+  for (KeyframeId c : children) {
+    Keyframe* child = keyframe(c);
+    if (child == nullptr || child->bad) continue;
+    KeyframeId new_parent = parent;
+    for (KeyframeId cand : best_covisibles(c, 10)) {
+      if (cand != kid && cand < c && keyframe(cand) != nullptr && !keyframe(cand)->bad) {
+        new_parent = cand;
+        break;
+      }
+    }
+    child->parent = new_parent;
+    keyframe(new_parent)->children.insert(c);
+  }
+  if (Keyframe* p = keyframe(parent)) p->children.erase(kid);
+  kf->covisibility.clear();
+  kf->children.clear();
+  kf->bad = true;
+}
+
+const std::unordered_map<KeyframeId, Keyframe>& MapView::keyframes() const { return map_.keyframes_; }
+const std::unordered_map<PointId, MapPoint>& MapView::points() const { return map_.points_; }
+
+std::vector<KeyframeId> MapView::keyframe_ids_sorted() const {
+  std::vector<KeyframeId> ids;
+  for (const auto& [id, kf] : map_.keyframes_) {
+    if (!kf.bad) ids.push_back(id);
+  }
+  std::sort(ids.begin(), ids.end());
+  return ids;
+}
+
+std::size_t MapView::live_keyframes() const {
+  return static_cast<std::size_t>(std::count_if(map_.keyframes_.begin(), map_.keyframes_.end(),
+                                                [](const auto& kv) { return !kv.second.bad; }));
+}
+
+std::size_t MapView::live_points() const {
+  return static_cast<std::size_t>(
+      std::count_if(map_.points_.begin(), map_.points_.end(), [](const auto& kv) { return !kv.second.bad; }));
+}
+
+void MapView::purge_bad() {
+  std::erase_if(map_.points_,
+                [](const auto& kv) { return kv.second.bad && kv.second.replaced_by == kNoPoint; });
+}
+
+}  // namespace sp::map

@@ -1,0 +1,81 @@
+#pragma once
+// The map: the one shared mutable structure of the system.
+//
+// Lock discipline: the Map is a monitor. Every read or write of keyframes and map points goes
+// through a MapView, which holds the map's single mutex for its lifetime. Stages keep views short:
+// heavy work (feature extraction, detection, the numeric part of bundle adjustment) runs on copies
+// without the lock, and results are written back through a new view. Ids, never pointers, are kept
+// across views; a pointer returned by a view is valid only while that view lives.
+#include <atomic>
+#include <mutex>
+#include <unordered_map>
+#include <vector>
+
+#include "stillpoint/map/keyframe.hpp"
+
+namespace sp::map {
+
+class Map;
+
+class MapView {
+ public:
+  explicit MapView(Map& map);
+
+  [[nodiscard]] Keyframe* keyframe(KeyframeId id);
+  [[nodiscard]] MapPoint* point(PointId id);
+  // Follows replaced_by links; nullptr when the point is gone or bad.
+  [[nodiscard]] MapPoint* live_point(PointId id);
+
+  KeyframeId add_keyframe(Keyframe kf);  // assigns the id; observations of kf.points are added
+  PointId add_point(MapPoint p);         // assigns the id
+
+  void add_observation(PointId p, KeyframeId kf, int feature);
+  void erase_observation(PointId p, KeyframeId kf);
+  void erase_point(PointId p);         // marks bad and detaches from keyframes
+  void erase_keyframe(KeyframeId kf);  // marks bad, detaches, re-parents the spanning tree
+  void replace_point(PointId old_id, PointId by);
+
+  void update_point_descriptor(PointId p);
+  void update_point_normal_and_depth(PointId p, const ScalePyramid& pyramid);
+  // Recomputes kf's covisibility edges (and its neighbours' back edges) and its spanning-tree parent.
+  void update_connections(KeyframeId kf, int min_weight = 15);
+
+  [[nodiscard]] std::vector<KeyframeId> best_covisibles(KeyframeId kf, std::size_t n) const;
+  [[nodiscard]] std::vector<KeyframeId> covisibles_with_weight(KeyframeId kf, int min_weight) const;
+  [[nodiscard]] int tracked_points(KeyframeId kf, int min_observations) const;
+
+  [[nodiscard]] const std::unordered_map<KeyframeId, Keyframe>& keyframes() const;
+  [[nodiscard]] const std::unordered_map<PointId, MapPoint>& points() const;
+  [[nodiscard]] std::vector<KeyframeId> keyframe_ids_sorted() const;
+  [[nodiscard]] std::size_t live_keyframes() const;
+  [[nodiscard]] std::size_t live_points() const;
+  // Drops bad records for good (they are kept a while so ids held by other stages resolve).
+  void purge_bad();
+
+ private:
+  Map& map_;
+  std::unique_lock<std::mutex> lock_;
+};
+
+class Map {
+ public:
+  Map() = default;
+  Map(const Map&) = delete;
+  Map& operator=(const Map&) = delete;
+
+  [[nodiscard]] MapView view() { return MapView(*this); }
+  // Incremented after a loop correction so the tracker refreshes its motion model and last frame.
+  [[nodiscard]] std::uint64_t big_change_count() const { return big_changes_.load(); }
+  void notify_big_change() { ++big_changes_; }
+
+ private:
+  friend class MapView;
+  std::mutex mutex_;
+  std::unordered_map<KeyframeId, Keyframe> keyframes_;
+  std::unordered_map<PointId, MapPoint> points_;
+  KeyframeId next_keyframe_id_ = 1;
+  PointId next_point_id_ = 1;
+  std::atomic<std::uint64_t> big_changes_{0};
+};
+
+}  // namespace sp::map

@@ -1,0 +1,284 @@
+#include "stillpoint/mapping/local_mapper.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <set>
+#include <unordered_map>
+#include <unordered_set>
+
+#include "stillpoint/common/timing.hpp"
+#include "stillpoint/features/descriptor.hpp"
+#include "stillpoint/tracking/projection_matcher.hpp"
+
+namespace sp::mapping {
+
+LocalMappingConfig LocalMappingConfig::from_yaml(const ConfigReader& r) {
+  LocalMappingConfig c;
+  r.read("fusion_neighbours", c.fusion_neighbours, std::size_t{0}, std::size_t{100});
+  r.read("fusion_radius", c.fusion_radius, 0.5, 50.0);
+  r.read("local_ba", c.local_ba);
+  r.read("ba_max_keyframes", c.ba_max_keyframes, std::size_t{2}, std::size_t{200});
+  r.read("redundancy", c.redundancy, 0.5, 1.0);
+  r.read("cull_keyframes", c.cull_keyframes);
+  r.read("min_found_ratio", c.min_found_ratio, 0.0, 1.0);
+  c.ba = opt::BAConfig::from_yaml(r.section("bundle_adjustment"));
+  return c;
+}
+
+LocalMapper::LocalMapper(map::Map& map, LocalMappingConfig config, geo::CameraIntrinsics camera,
+                         track::DepthModel depth, map::ScalePyramid pyramid)
+    : map_(map),
+      config_(std::move(config)),
+      camera_(camera),
+      depth_(depth),
+      pyramid_(std::move(pyramid)),
+      camera_model_{camera.fx, camera.fy, camera.cx, camera.cy, depth.bf} {}
+
+LocalMappingStats LocalMapper::process(map::KeyframeId kid, const std::atomic<bool>* abort) {
+  LocalMappingStats stats;
+  {
+    map::MapView view = map_.view();
+    if (view.keyframe(kid) == nullptr || view.keyframe(kid)->bad) return stats;
+    integrate(view, kid);
+    stats.culled_points = cull_recent_points(view, kid);
+    stats.fused_points = fuse_neighbours(view, kid);
+  }
+  if (config_.local_ba) local_bundle_adjustment(kid, abort, stats);
+  if (config_.cull_keyframes) {
+    map::MapView view = map_.view();
+    stats.culled_keyframes = cull_keyframes(view, kid);
+  }
+  return stats;
+}
+
+void LocalMapper::integrate(map::MapView& view, map::KeyframeId kid) {
+  const map::Keyframe* kf = view.keyframe(kid);
+  for (map::PointId pid : kf->points) {
+    if (pid == map::kNoPoint) continue;
+    const map::MapPoint* p = view.point(pid);
+    if (p == nullptr || p->bad) continue;
+    view.update_point_normal_and_depth(pid, pyramid_);
+    view.update_point_descriptor(pid);
+    if (p->first_keyframe == kid) recent_points_.push_back(pid);
+  }
+  view.update_connections(kid);
+}
+
+int LocalMapper::cull_recent_points(map::MapView& view, map::KeyframeId kid) {
+  int culled = 0;
+  std::vector<map::PointId> keep;
+  for (map::PointId pid : recent_points_) {
+    map::MapPoint* p = view.point(pid);
+    if (p == nullptr || p->bad) continue;
+    // Keyframe ids grow by one per keyframe, so the id gap counts keyframes since the point's birth.
+    const auto age = kid - p->first_keyframe;
+    if (p->found_ratio() < config_.min_found_ratio || (age >= 2 && p->observations.size() < 2)) {
+      view.erase_point(pid);
+      ++culled;
+    } else if (age < 3) {
+      keep.push_back(pid);
+    }
+  }
+  recent_points_ = std::move(keep);
+  return culled;
+}
+
+int LocalMapper::fuse_into(map::MapView& view, map::KeyframeId target,
+                           const std::vector<map::PointId>& points) {
+  map::Keyframe* kf = view.keyframe(target);
+  if (kf == nullptr || kf->bad) return 0;
+  const Eigen::Vector3d center = kf->camera_center();
+  int fused = 0;
+  for (map::PointId pid : points) {
+    map::MapPoint* p = view.live_point(pid);
+    if (p == nullptr || p->observations.contains(target)) continue;
+    Eigen::Vector2d uv;
+    double z = 0;
+    if (!track::project_point(kf->T_cw, p->position, camera_, uv, z)) continue;
+    const Eigen::Vector3d ray = p->position - center;
+    const double dist = ray.norm();
+    if (dist < 0.8 * p->min_distance || dist > 1.2 * p->max_distance) continue;
+    if (ray.dot(p->normal) / dist < 0.5) continue;
+    const int level = p->predict_level(dist, pyramid_);
+    const double r = config_.fusion_radius * pyramid_.scale[static_cast<std::size_t>(level)];
+    int best = 256, best_idx = -1;
+    for (int c : kf->index.in_area(uv.x(), uv.y(), r)) {
+      const auto ci = static_cast<std::size_t>(c);
+      const auto& kp = kf->features.keypoints[ci];
+      if (kp.octave < level - 1 || kp.octave > level) continue;
+      // Reprojection error gate (chi-square 3 dof for RGB-D, 2 dof otherwise).
+      const double inv_s2 = pyramid_.inv_level_sigma2[static_cast<std::size_t>(kp.octave)];
+      const double eu = uv.x() - kp.pt.x, ev = uv.y() - kp.pt.y;
+      double e2 = (eu * eu + ev * ev) * inv_s2;
+      const float ur = kf->features.u_right[ci];
+      if (ur > 0) {
+        const double er = uv.x() - depth_.bf / z - ur;
+        if ((e2 + er * er * inv_s2) > 7.8) continue;
+      } else if (e2 > 5.99) {
+        continue;
+      }
+      const int d = feat::hamming_distance(p->descriptor.ptr<std::uint8_t>(),
+                                           kf->features.descriptors.ptr<std::uint8_t>(c));
+      if (d < best) {
+        best = d;
+        best_idx = c;
+      }
+    }
+    if (best_idx < 0 || best > 50) continue;
+    const map::PointId existing = kf->points[static_cast<std::size_t>(best_idx)];
+    const map::MapPoint* other = existing == map::kNoPoint ? nullptr : view.live_point(existing);
+    if (other != nullptr) {
+      // Keep the better-observed point.
+      if (other->observations.size() >= p->observations.size()) {
+        view.replace_point(p->id, other->id);
+      } else {
+        view.replace_point(other->id, p->id);
+      }
+    } else {
+      view.add_observation(p->id, target, best_idx);
+    }
+    ++fused;
+  }
+  return fused;
+}
+
+int LocalMapper::fuse_neighbours(map::MapView& view, map::KeyframeId kid) {
+  std::vector<map::KeyframeId> targets;
+  std::set<map::KeyframeId> seen{kid};
+  for (map::KeyframeId n : view.best_covisibles(kid, config_.fusion_neighbours)) {
+    if (seen.insert(n).second) targets.push_back(n);
+  }
+  const std::size_t first = targets.size();
+  for (std::size_t k = 0; k < first; ++k) {
+    for (map::KeyframeId n2 : view.best_covisibles(targets[k], 5)) {
+      if (seen.insert(n2).second) targets.push_back(n2);
+    }
+  }
+  int fused = 0;
+  std::vector<map::PointId> own;
+  for (map::PointId pid : view.keyframe(kid)->points) {
+    if (pid != map::kNoPoint) own.push_back(pid);
+  }
+  for (map::KeyframeId t : targets) fused += fuse_into(view, t, own);
+  std::vector<map::PointId> theirs;
+  std::unordered_set<map::PointId> uniq;
+  for (map::KeyframeId t : targets) {
+    for (map::PointId pid : view.keyframe(t)->points) {
+      if (pid != map::kNoPoint && uniq.insert(pid).second) theirs.push_back(pid);
+    }
+  }
+  fused += fuse_into(view, kid, theirs);
+  for (map::PointId pid : view.keyframe(kid)->points) {
+    if (pid == map::kNoPoint) continue;
+    view.update_point_descriptor(pid);
+    view.update_point_normal_and_depth(pid, pyramid_);
+  }
+  view.update_connections(kid);
+  return fused;
+}
+
+bool LocalMapper::local_bundle_adjustment(map::KeyframeId kid, const std::atomic<bool>* abort,
+                                          LocalMappingStats& stats) {
+  opt::BAProblem problem;
+  std::unordered_set<map::KeyframeId> local;
+  {
+    map::MapView view = map_.view();
+    std::vector<map::KeyframeId> local_ids{kid};
+    for (map::KeyframeId n : view.best_covisibles(kid, config_.ba_max_keyframes - 1)) local_ids.push_back(n);
+    local.insert(local_ids.begin(), local_ids.end());
+    std::unordered_set<map::PointId> points;
+    for (map::KeyframeId k : local_ids) {
+      for (map::PointId pid : view.keyframe(k)->points) {
+        const map::MapPoint* p = pid == map::kNoPoint ? nullptr : view.point(pid);
+        if (p != nullptr && !p->bad) points.insert(pid);
+      }
+    }
+    if (points.empty()) return false;
+    std::unordered_set<map::KeyframeId> fixed;
+    std::vector<map::PointId> sorted_points(points.begin(), points.end());
+    std::sort(sorted_points.begin(), sorted_points.end());  // deterministic problem order
+    for (map::PointId pid : sorted_points) {
+      const map::MapPoint* p = view.point(pid);
+      problem.points.push_back({pid, p->position});
+      for (const auto& [k, feature] : p->observations) {
+        const map::Keyframe* kf = view.keyframe(k);
+        if (kf == nullptr || kf->bad) continue;
+        if (!local.contains(k)) fixed.insert(k);
+        const auto& kp = kf->features.keypoints[static_cast<std::size_t>(feature)];
+        opt::BAObservation o;
+        o.keyframe_id = k;
+        o.point_id = pid;
+        o.uv = {kp.pt.x, kp.pt.y};
+        o.u_right = kf->features.u_right[static_cast<std::size_t>(feature)];
+        o.inv_sigma2 = pyramid_.inv_level_sigma2[static_cast<std::size_t>(kp.octave)];
+        problem.observations.push_back(o);
+      }
+    }
+    std::vector<map::KeyframeId> kf_ids(local.begin(), local.end());
+    kf_ids.insert(kf_ids.end(), fixed.begin(), fixed.end());
+    std::sort(kf_ids.begin(), kf_ids.end());
+    const map::KeyframeId root = view.keyframe_ids_sorted().front();
+    for (map::KeyframeId k : kf_ids) {
+      // The first keyframe anchors the gauge.
+      problem.keyframes.push_back({k, view.keyframe(k)->T_cw, fixed.contains(k) || k == root});
+    }
+  }
+  if (problem.keyframes.size() < 2) return false;
+  Stopwatch watch;
+  const opt::BAResult result = opt::run_bundle_adjustment(problem, camera_model_, config_.ba, abort);
+  stats.ba_ms = watch.elapsed_ms();
+  stats.ba_aborted = result.aborted;
+  if (result.aborted) return false;
+
+  map::MapView view = map_.view();
+  for (std::size_t i = 0; i < problem.observations.size(); ++i) {
+    if (!result.outlier[i]) continue;
+    const auto& o = problem.observations[i];
+    view.erase_observation(o.point_id, o.keyframe_id);
+  }
+  for (const auto& k : problem.keyframes) {
+    if (k.fixed) continue;
+    if (map::Keyframe* kf = view.keyframe(k.id); kf != nullptr && !kf->bad) kf->T_cw = k.T_cw;
+  }
+  for (const auto& p : problem.points) {
+    map::MapPoint* mp = view.point(p.id);
+    if (mp == nullptr || mp->bad) continue;
+    mp->position = p.p_w;
+    view.update_point_normal_and_depth(p.id, pyramid_);
+  }
+  return true;
+}
+
+int LocalMapper::cull_keyframes(map::MapView& view, map::KeyframeId kid) {
+  int culled = 0;
+  for (map::KeyframeId k : view.best_covisibles(kid, std::numeric_limits<std::size_t>::max())) {
+    map::Keyframe* kf = view.keyframe(k);
+    if (kf == nullptr || kf->bad || kf->parent == map::kNoKeyframe || kf->protected_from_culling) continue;
+    int close = 0, redundant = 0;
+    for (std::size_t i = 0; i < kf->points.size(); ++i) {
+      const map::PointId pid = kf->points[i];
+      const map::MapPoint* p = pid == map::kNoPoint ? nullptr : view.point(pid);
+      if (p == nullptr || p->bad) continue;
+      const float d = kf->features.depth[i];
+      if (d <= 0 || d > depth_.close_depth) continue;  // only close points count for RGB-D
+      ++close;
+      const int level = kf->features.keypoints[i].octave;
+      int others = 0;
+      for (const auto& [ok, feature] : p->observations) {
+        if (ok == k) continue;
+        const map::Keyframe* okf = view.keyframe(ok);
+        if (okf == nullptr || okf->bad) continue;
+        if (okf->features.keypoints[static_cast<std::size_t>(feature)].octave <= level + 1 && ++others >= 3)
+          break;
+      }
+      if (others >= 3) ++redundant;
+    }
+    if (close > 0 && redundant > config_.redundancy * close) {
+      view.erase_keyframe(k);
+      ++culled;
+    }
+  }
+  return culled;
+}
+
+}  // namespace sp::mapping

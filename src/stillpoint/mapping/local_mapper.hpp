@@ -1,0 +1,61 @@
+#pragma once
+// Local mapping: integrates each new keyframe into the map (point upkeep, culling of weak points,
+// fusion of duplicates with neighbours), refines the neighbourhood with local bundle adjustment and
+// culls redundant keyframes. One job per call; the stage that runs it owns the thread.
+#include <atomic>
+#include <vector>
+
+#include "stillpoint/common/config_reader.hpp"
+#include "stillpoint/geometry/camera.hpp"
+#include "stillpoint/map/map.hpp"
+#include "stillpoint/optimize/bundle_adjustment.hpp"
+#include "stillpoint/tracking/frame.hpp"
+
+namespace sp::mapping {
+
+struct LocalMappingConfig {
+  std::size_t fusion_neighbours = 10;  // best covisibles searched for duplicates (ORB-SLAM RGB-D)
+  double fusion_radius = 3.0;          // px at level 0
+  bool local_ba = true;
+  std::size_t ba_max_keyframes = 20;  // optimised keyframes (the rest that see the points stay fixed)
+  double redundancy = 0.9;            // share of a keyframe's points seen by 3 others -> culled
+  bool cull_keyframes = true;
+  double min_found_ratio = 0.25;  // new points matched less often than this are dropped
+  opt::BAConfig ba;
+  static LocalMappingConfig from_yaml(const ConfigReader& r);
+};
+
+struct LocalMappingStats {
+  double ba_ms = 0;
+  int culled_points = 0;
+  int fused_points = 0;
+  int culled_keyframes = 0;
+  bool ba_aborted = false;
+};
+
+class LocalMapper {
+ public:
+  LocalMapper(map::Map& map, LocalMappingConfig config, geo::CameraIntrinsics camera, track::DepthModel depth,
+              map::ScalePyramid pyramid);
+
+  // Integrates one keyframe (already in the map). `abort` lets a newer keyframe or a loop cut BA short.
+  LocalMappingStats process(map::KeyframeId keyframe, const std::atomic<bool>* abort = nullptr);
+
+ private:
+  void integrate(map::MapView& view, map::KeyframeId kid);
+  int cull_recent_points(map::MapView& view, map::KeyframeId kid);
+  int fuse_neighbours(map::MapView& view, map::KeyframeId kid);
+  int fuse_into(map::MapView& view, map::KeyframeId target, const std::vector<map::PointId>& points);
+  bool local_bundle_adjustment(map::KeyframeId kid, const std::atomic<bool>* abort, LocalMappingStats& stats);
+  int cull_keyframes(map::MapView& view, map::KeyframeId kid);
+
+  map::Map& map_;
+  LocalMappingConfig config_;
+  geo::CameraIntrinsics camera_;
+  track::DepthModel depth_;
+  map::ScalePyramid pyramid_;
+  opt::CameraModel camera_model_;
+  std::vector<map::PointId> recent_points_;
+};
+
+}  // namespace sp::mapping

@@ -1,0 +1,34 @@
+#pragma once
+// Turns a decoded RGB-D frame into features: grey image, ORB, undistortion, depth per feature.
+// Dynamic culling sits between extract() and assemble(), so moving features never reach tracking.
+#include <vector>
+
+#include "stillpoint/features/orb_extractor.hpp"
+#include "stillpoint/io/frame.hpp"
+#include "stillpoint/tracking/frame.hpp"
+
+namespace sp::pipeline {
+
+struct ExtractedFeatures {
+  cv::Mat gray;
+  std::vector<cv::KeyPoint> keypoints;  // raw (distorted) image coordinates
+  cv::Mat descriptors;
+};
+
+class FrontEnd {
+ public:
+  FrontEnd(const feat::OrbConfig& orb, const geo::CameraIntrinsics& camera, const track::DepthModel& depth);
+
+  ExtractedFeatures extract(const io::FrameData& data);
+  // Builds the tracker's frame; features flagged in `drop` (dynamic) are removed.
+  track::Frame assemble(const io::FrameData& data, ExtractedFeatures features,
+                        const std::vector<bool>& drop) const;
+  [[nodiscard]] map::ScalePyramid pyramid() const;
+
+ private:
+  feat::OrbExtractor extractor_;
+  geo::CameraIntrinsics camera_;
+  track::DepthModel depth_;
+};
+
+}  // namespace sp::pipeline

@@ -1,0 +1,94 @@
+#include "stillpoint/pipeline/runner.hpp"
+
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+
+#include <fstream>
+
+#include "stillpoint/common/error.hpp"
+#include "stillpoint/common/progress_bar.hpp"
+#include "stillpoint/common/timing.hpp"
+#include "stillpoint/eval/evaluate.hpp"
+#include "stillpoint/pipeline/slam_system.hpp"
+
+namespace sp::pipeline {
+
+namespace {
+
+void write_json(const std::filesystem::path& file, const nlohmann::json& j) {
+  const auto tmp = file.string() + ".tmp";
+  {
+    std::ofstream out(tmp);
+    if (!out) throw Error("cannot write " + file.string());
+    out << j.dump(2) << "\n";
+  }
+  std::filesystem::rename(tmp, file);
+}
+
+void write_outputs(SlamSystem& system, const RunOptions& options, RunResult& result) {
+  std::filesystem::create_directories(options.out_dir);
+  const auto trajectory = system.trajectory();
+  io::write_tum_trajectory(options.out_dir / "trajectory.txt", trajectory);
+  io::write_tum_trajectory(options.out_dir / "keyframes.txt", system.keyframe_trajectory());
+  result.stats = system.statistics();
+  result.stats["completed"] = result.completed;
+  for (const auto& [k, v] : options.extra_stats.items()) result.stats[k] = v;
+  if (options.groundtruth && trajectory.size() >= 3) {
+    try {
+      const auto gt = io::read_tum_trajectory(*options.groundtruth);
+      const auto ev = eval::evaluate(gt, trajectory, eval::EvalOptions{});
+      result.stats["eval"] = eval::to_json(ev);
+      result.ate_rmse = ev.ate.rmse;
+      eval::write_plot(options.out_dir / "trajectory.png", ev);
+    } catch (const Error& e) {
+      spdlog::warn("evaluation skipped: {}", e.what());
+    }
+  }
+  write_json(options.out_dir / "stats.json", result.stats);
+}
+
+}  // namespace
+
+RunResult run_slam(io::FrameSource& source, const SystemConfig& config, const RunOptions& options) {
+  RunResult result;
+  SlamSystem system(config, source.camera(), options.deterministic);
+  ProgressBar bar(options.label.empty() ? "tracking" : options.label, source.size_hint(), options.progress);
+  Stopwatch wall;
+  std::size_t done = 0;
+  std::size_t lost = 0;
+  bool interrupted = false;
+  try {
+    while (true) {
+      if (options.stop != nullptr && options.stop->load()) {
+        spdlog::warn("stop requested: finishing and writing the trajectory so far");
+        interrupted = true;
+        break;
+      }
+      Stopwatch load;
+      auto data = source.next();
+      system.times().add("load", load.elapsed_ms());
+      if (!data) break;
+      const FrameReport report = system.process(*data);
+      if (report.state == track::TrackingState::Lost) ++lost;
+      ++done;
+      if (system.failed()) throw Error("a pipeline stage failed (see the log)");
+      const double fps = static_cast<double>(done) / std::max(1e-9, wall.elapsed_ms() / 1000.0);
+      bar.update(done, fmt::format("{:.1f} fps, {} lost", fps, lost));
+    }
+    result.completed = !interrupted;
+  } catch (const std::exception& e) {
+    spdlog::error("run stopped at frame {}: {}", done, e.what());
+    result.completed = false;
+  }
+  bar.finish();
+  system.finish();
+  const double seconds = wall.elapsed_ms() / 1000.0;
+  write_outputs(system, options, result);
+  result.stats["wall_s"] = seconds;
+  result.stats["fps"] = static_cast<double>(done) / std::max(1e-9, seconds);
+  result.stats["skipped_frames"] = source.skipped_frames();
+  write_json(options.out_dir / "stats.json", result.stats);
+  return result;
+}
+
+}  // namespace sp::pipeline

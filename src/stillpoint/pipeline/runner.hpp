@@ -1,0 +1,33 @@
+#pragma once
+// Runs the SLAM system over a frame source and writes what a user expects in OUT: the trajectory of
+// every frame (TUM format), the keyframe trajectory, stats.json, and, with ground truth, ATE/RPE and
+// a plot. Outputs are written also when the run stops early (error, Ctrl-C).
+#include <atomic>
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <optional>
+
+#include "stillpoint/io/frame_source.hpp"
+#include "stillpoint/pipeline/system_config.hpp"
+
+namespace sp::pipeline {
+
+struct RunOptions {
+  std::filesystem::path out_dir;
+  bool deterministic = false;
+  bool progress = true;
+  std::optional<std::filesystem::path> groundtruth;
+  const std::atomic<bool>* stop = nullptr;  // set asynchronously (SIGINT) to end the run early
+  std::string label;                        // shown in the progress bar
+  nlohmann::json extra_stats;               // merged into stats.json (mode switches etc.)
+};
+
+struct RunResult {
+  nlohmann::json stats;
+  bool completed = false;  // false when stopped early or a stage failed
+  std::optional<double> ate_rmse;
+};
+
+RunResult run_slam(io::FrameSource& source, const SystemConfig& config, const RunOptions& options);
+
+}  // namespace sp::pipeline

@@ -1,0 +1,61 @@
+#pragma once
+// The System wires the stages: front end (features, dynamic culling) and tracking on the caller's
+// thread, local mapping and loop closing on their own threads, joined by bounded queues. With
+// `deterministic` every stage runs in lock-step on the caller's thread.
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <vector>
+
+#include "stillpoint/common/timing.hpp"
+#include "stillpoint/io/camera_config.hpp"
+#include "stillpoint/io/frame.hpp"
+#include "stillpoint/io/trajectory_io.hpp"
+#include "stillpoint/map/map.hpp"
+#include "stillpoint/pipeline/frontend.hpp"
+#include "stillpoint/pipeline/local_mapping_stage.hpp"
+#include "stillpoint/pipeline/system_config.hpp"
+
+namespace sp::pipeline {
+
+struct FrameReport {
+  track::TrackingState state = track::TrackingState::NotInitialized;
+  int inliers = 0;
+  std::size_t features = 0;
+  std::size_t culled = 0;
+  bool keyframe = false;
+};
+
+class SlamSystem {
+ public:
+  SlamSystem(SystemConfig config, io::CameraConfig camera, bool deterministic);
+  ~SlamSystem();
+  SlamSystem(const SlamSystem&) = delete;
+  SlamSystem& operator=(const SlamSystem&) = delete;
+
+  FrameReport process(const io::FrameData& frame);
+  // Waits for the background stages to finish their queues and stops them.
+  void finish();
+
+  [[nodiscard]] std::vector<io::StampedPose> trajectory();
+  [[nodiscard]] std::vector<io::StampedPose> keyframe_trajectory();
+  [[nodiscard]] nlohmann::json statistics();
+  [[nodiscard]] StageTimes& times() { return times_; }
+  [[nodiscard]] bool failed() const;
+
+ private:
+  SystemConfig config_;
+  io::CameraConfig camera_;
+  bool deterministic_;
+  StageTimes times_;
+  map::Map map_;
+  FrontEnd frontend_;
+  track::Tracker tracker_;
+  mapping::LocalMapper mapper_;
+  std::unique_ptr<LocalMappingStage> mapping_stage_;
+  std::size_t frames_ = 0;
+  std::size_t culled_total_ = 0;
+  std::size_t keyframes_created_ = 0;
+  bool finished_ = false;
+};
+
+}  // namespace sp::pipeline

@@ -1,0 +1,35 @@
+#pragma once
+// The whole system's configuration: one typed struct per module, loaded from one YAML file and
+// validated on load (unknown keys, missing keys and out-of-range values name the file and line).
+#include <filesystem>
+#include <string>
+
+#include "stillpoint/common/config_reader.hpp"
+#include "stillpoint/features/orb_extractor.hpp"
+#include "stillpoint/mapping/local_mapper.hpp"
+#include "stillpoint/tracking/frame.hpp"
+#include "stillpoint/tracking/tracker.hpp"
+
+namespace sp::pipeline {
+
+struct PipelineConfig {
+  std::size_t mapping_queue = 8;  // keyframes waiting for local mapping
+  std::size_t loop_queue = 16;    // keyframes waiting for loop closing
+  static PipelineConfig from_yaml(const ConfigReader& r);
+};
+
+struct SystemConfig {
+  feat::OrbConfig orb;
+  track::DepthModel depth;
+  track::TrackerConfig tracker;
+  mapping::LocalMappingConfig mapping;
+  PipelineConfig pipeline;
+
+  static SystemConfig from_yaml(const ConfigReader& r);
+  // Loads and validates a file; every key must be known.
+  static SystemConfig load(const std::filesystem::path& file);
+};
+
+track::DepthModel depth_model_from_yaml(const ConfigReader& r);
+
+}  // namespace sp::pipeline

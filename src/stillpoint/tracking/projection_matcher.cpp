@@ -1,0 +1,175 @@
+#include "stillpoint/tracking/projection_matcher.hpp"
+
+#include <cmath>
+
+#include "stillpoint/features/descriptor.hpp"
+#include "stillpoint/features/matching.hpp"
+
+namespace sp::track {
+
+namespace {
+
+int distance(const cv::Mat& a, int row_a, const cv::Mat& b, int row_b) {
+  return feat::hamming_distance(a.ptr<std::uint8_t>(row_a), b.ptr<std::uint8_t>(row_b));
+}
+
+// Removes matches whose orientation change disagrees with the dominant rotation.
+void apply_rotation_check(Frame& cur, feat::RotationHistogram& hist, int& matches) {
+  for (std::size_t idx : hist.outliers()) {
+    if (cur.points[idx] != map::kNoPoint) {
+      cur.points[idx] = map::kNoPoint;
+      --matches;
+    }
+  }
+}
+
+float angle_diff(float a, float b) {
+  float d = a - b;
+  if (d < 0) d += 360.0f;
+  return d;
+}
+
+}  // namespace
+
+bool project_point(const geo::SE3& T_cw, const Eigen::Vector3d& p_w, const geo::CameraIntrinsics& camera,
+                   Eigen::Vector2d& uv, double& depth) {
+  const Eigen::Vector3d p_c = T_cw * p_w;
+  depth = p_c.z();
+  if (depth <= 0) return false;
+  uv = camera.project(p_c);
+  return camera.in_image(uv);
+}
+
+int match_last_frame(map::MapView& view, Frame& cur, const Frame& last, double radius,
+                     const MatchContext& ctx) {
+  int matches = 0;
+  feat::RotationHistogram hist;
+  const Eigen::Vector3d t_cl = (cur.T_cw * last.T_cw.inverse()).translation();
+  // Forward/backward camera motion shifts the expected pyramid level (ORB-SLAM's monocular/RGB-D trick).
+  const bool forward = t_cl.z() > 0.05;
+  const bool backward = t_cl.z() < -0.05;
+  for (std::size_t i = 0; i < last.points.size(); ++i) {
+    if (last.points[i] == map::kNoPoint || last.outlier[i]) continue;
+    const map::MapPoint* p = view.live_point(last.points[i]);
+    if (p == nullptr) continue;
+    Eigen::Vector2d uv;
+    double z = 0;
+    if (!project_point(cur.T_cw, p->position, ctx.camera, uv, z)) continue;
+    const int last_level = last.features.keypoints[i].octave;
+    const double r = radius * ctx.pyramid.scale[static_cast<std::size_t>(last_level)];
+    std::vector<int> candidates;
+    if (forward) {
+      candidates = cur.grid.in_area(uv.x(), uv.y(), r, last_level);
+    } else if (backward) {
+      candidates = cur.grid.in_area(uv.x(), uv.y(), r, 0, last_level);
+    } else {
+      candidates = cur.grid.in_area(uv.x(), uv.y(), r, last_level - 1, last_level + 1);
+    }
+    int best = 256;
+    int best_idx = -1;
+    for (int c : candidates) {
+      const auto ci = static_cast<std::size_t>(c);
+      if (cur.points[ci] != map::kNoPoint) continue;
+      // The virtual right coordinate must agree too: it checks the depth (RGB-D).
+      if (cur.features.u_right[ci] > 0 && std::abs(uv.x() - ctx.bf / z - cur.features.u_right[ci]) > r)
+        continue;
+      const int d = distance(p->descriptor, 0, cur.features.descriptors, c);
+      if (d < best) {
+        best = d;
+        best_idx = c;
+      }
+    }
+    if (best_idx >= 0 && best <= kDescriptorThHigh) {
+      cur.points[static_cast<std::size_t>(best_idx)] = p->id;
+      ++matches;
+      hist.add(angle_diff(last.features.keypoints[i].angle,
+                          cur.features.keypoints[static_cast<std::size_t>(best_idx)].angle),
+               static_cast<std::size_t>(best_idx));
+    }
+  }
+  apply_rotation_check(cur, hist, matches);
+  return matches;
+}
+
+int match_local_points(map::MapView& view, Frame& cur, const std::vector<map::PointId>& local_points,
+                       double radius_factor, const MatchContext& ctx) {
+  int matches = 0;
+  const Eigen::Vector3d center = cur.camera_center();
+  for (std::size_t k = 0; k < local_points.size(); ++k) {
+    map::MapPoint* p = view.point(local_points[k]);
+    if (p == nullptr || p->bad) continue;
+    Eigen::Vector2d uv;
+    double z = 0;
+    if (!project_point(cur.T_cw, p->position, ctx.camera, uv, z)) continue;
+    const Eigen::Vector3d ray = p->position - center;
+    const double dist = ray.norm();
+    if (dist < 0.8 * p->min_distance || dist > 1.2 * p->max_distance) continue;
+    if (ray.dot(p->normal) / dist < 0.5) continue;  // viewing angle over 60 deg
+    ++p->visible;
+    const int level = p->predict_level(dist, ctx.pyramid);
+    // Wider window when the viewing direction is close to the mean one (ORB-SLAM's heuristic).
+    const double cos_view = ray.dot(p->normal) / dist;
+    const double r =
+        radius_factor * (cos_view > 0.998 ? 2.5 : 4.0) * ctx.pyramid.scale[static_cast<std::size_t>(level)];
+    const auto candidates = cur.grid.in_area(uv.x(), uv.y(), r, level - 1, level);
+    int best = 256, second = 256, best_level = -1, second_level = -1, best_idx = -1;
+    for (int c : candidates) {
+      const auto ci = static_cast<std::size_t>(c);
+      if (cur.points[ci] != map::kNoPoint) continue;
+      // The virtual right coordinate must agree too: it checks the depth (RGB-D).
+      if (cur.features.u_right[ci] > 0 && std::abs(uv.x() - ctx.bf / z - cur.features.u_right[ci]) > r)
+        continue;
+      const int d = distance(p->descriptor, 0, cur.features.descriptors, c);
+      if (d < best) {
+        second = best;
+        second_level = best_level;
+        best = d;
+        best_level = cur.features.keypoints[ci].octave;
+        best_idx = c;
+      } else if (d < second) {
+        second = d;
+        second_level = cur.features.keypoints[ci].octave;
+      }
+    }
+    if (best_idx < 0 || best > kDescriptorThHigh) continue;
+    // Ratio test only between candidates of the same level (ORB-SLAM).
+    if (best_level == second_level && best > 0.8 * second) continue;
+    cur.points[static_cast<std::size_t>(best_idx)] = p->id;
+    ++matches;
+  }
+  return matches;
+}
+
+int match_keyframe(map::MapView& view, Frame& cur, const map::Keyframe& kf, float ratio) {
+  int matches = 0;
+  feat::RotationHistogram hist;
+  std::vector<int> best_for_cur(cur.features.size(), 256);
+  for (std::size_t i = 0; i < kf.points.size(); ++i) {
+    if (kf.points[i] == map::kNoPoint) continue;
+    const map::MapPoint* p = view.live_point(kf.points[i]);
+    if (p == nullptr) continue;
+    int best = 256, second = 256, best_idx = -1;
+    for (std::size_t c = 0; c < cur.features.size(); ++c) {
+      const int d = distance(kf.features.descriptors, static_cast<int>(i), cur.features.descriptors,
+                             static_cast<int>(c));
+      if (d < best) {
+        second = best;
+        best = d;
+        best_idx = static_cast<int>(c);
+      } else if (d < second) {
+        second = d;
+      }
+    }
+    if (best_idx < 0 || best > kDescriptorThLow || best > ratio * second) continue;
+    const auto bi = static_cast<std::size_t>(best_idx);
+    if (cur.points[bi] != map::kNoPoint && best >= best_for_cur[bi]) continue;
+    if (cur.points[bi] == map::kNoPoint) ++matches;
+    cur.points[bi] = p->id;
+    best_for_cur[bi] = best;
+    hist.add(angle_diff(kf.features.keypoints[i].angle, cur.features.keypoints[bi].angle), bi);
+  }
+  apply_rotation_check(cur, hist, matches);
+  return matches;
+}
+
+}  // namespace sp::track

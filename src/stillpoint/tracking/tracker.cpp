@@ -1,0 +1,417 @@
+#include "stillpoint/tracking/tracker.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <numeric>
+#include <opencv2/calib3d.hpp>
+#include <unordered_set>
+
+#include "stillpoint/tracking/projection_matcher.hpp"
+
+namespace sp::track {
+
+TrackerConfig TrackerConfig::from_yaml(const ConfigReader& r) {
+  TrackerConfig c;
+  r.read("init_min_features", c.init_min_features, 10, 100000);
+  r.read("motion_search_radius", c.motion_search_radius, 1.0, 100.0);
+  r.read("min_motion_matches", c.min_motion_matches, 5, 10000);
+  r.read("local_search_factor", c.local_search_factor, 0.5, 20.0);
+  r.read("min_inliers", c.min_inliers, 5, 10000);
+  r.read("min_inliers_after_reloc", c.min_inliers_after_reloc, 5, 10000);
+  r.read("max_local_keyframes", c.max_local_keyframes, std::size_t{5}, std::size_t{1000});
+  r.read("new_points_min", c.new_points_min, 0, 10000);
+  r.read("relocalization_candidates", c.relocalization_candidates, std::size_t{1}, std::size_t{1000});
+  c.pose = opt::PoseOptimizerConfig::from_yaml(r.section("pose_optimizer"));
+  c.keyframes = KeyframePolicyConfig::from_yaml(r.section("keyframes"));
+  return c;
+}
+
+const char* to_string(TrackingState s) {
+  switch (s) {
+    case TrackingState::NotInitialized:
+      return "not_initialized";
+    case TrackingState::Ok:
+      return "ok";
+    case TrackingState::Lost:
+      return "lost";
+  }
+  return "?";
+}
+
+Tracker::Tracker(map::Map& map, TrackerConfig config, geo::CameraIntrinsics camera, DepthModel depth,
+                 map::ScalePyramid pyramid, double fps)
+    : map_(map),
+      config_(std::move(config)),
+      camera_(camera),
+      depth_(depth),
+      pyramid_(std::move(pyramid)),
+      fps_(fps),
+      policy_(make_keyframe_policy(config_.keyframes)),
+      camera_model_{camera.fx, camera.fy, camera.cx, camera.cy, depth.bf} {}
+
+TrackOutcome Tracker::track(Frame& frame, const MappingStatus& mapping) {
+  TrackOutcome out;
+  frame.reset_matches();
+  frame.grid = map::FeatureIndex(frame.features.keypoints, camera_.width, camera_.height);
+  map::MapView view = map_.view();
+
+  if (state_ == TrackingState::NotInitialized) {
+    if (initialize(view, frame)) {
+      state_ = TrackingState::Ok;
+      out.new_keyframe = reference_;
+    }
+  } else {
+    refresh_last_frame(view);
+    bool ok = false;
+    if (state_ == TrackingState::Ok) {
+      if (velocity_) ok = track_motion_model(view, frame);
+      if (!ok) ok = track_reference_keyframe(view, frame);
+    } else {
+      ok = relocalize(view, frame);
+      out.relocalized = ok;
+    }
+    if (ok) ok = track_local_map(view, frame);
+    if (ok) {
+      if (last_frame_.has_pose) velocity_ = frame.T_cw * last_frame_.T_cw.inverse();
+      state_ = TrackingState::Ok;
+      if (need_keyframe(view, frame, mapping)) out.new_keyframe = create_keyframe(view, frame);
+    } else {
+      state_ = TrackingState::Lost;
+      velocity_.reset();
+      ++lost_frames_;
+    }
+  }
+
+  if (state_ == TrackingState::Ok && frame.has_pose) {
+    frame.reference = reference_;
+    const map::Keyframe* ref = view.keyframe(reference_);
+    trajectory_.record({frame.index, frame.stamp, reference_, frame.T_cw * ref->T_cw.inverse()});
+  }
+  out.state = state_;
+  out.inliers = frame.matched();
+  // Outliers are forgotten so the next frame does not project them.
+  for (std::size_t i = 0; i < frame.points.size(); ++i) {
+    if (frame.outlier[i]) frame.points[i] = map::kNoPoint;
+  }
+  last_frame_ = frame;
+  if (state_ != TrackingState::Ok) last_frame_.has_pose = false;
+  return out;
+}
+
+bool Tracker::initialize(map::MapView& view, Frame& frame) {
+  const auto with_depth =
+      std::count_if(frame.features.depth.begin(), frame.features.depth.end(), [](float d) { return d > 0; });
+  if (with_depth < config_.init_min_features) return false;
+  frame.T_cw = geo::SE3();
+  frame.has_pose = true;
+  reference_ = create_keyframe(view, frame);
+  spdlog::info("map initialised at frame {} with {} points", frame.index, view.live_points());
+  return true;
+}
+
+void Tracker::refresh_last_frame(map::MapView& view) {
+  // Points may have been fused by local mapping: follow replacements.
+  for (auto& pid : last_frame_.points) {
+    if (pid == map::kNoPoint) continue;
+    const map::MapPoint* p = view.live_point(pid);
+    pid = p == nullptr ? map::kNoPoint : p->id;
+  }
+  // After a loop correction or BA the last frame moves with its reference keyframe.
+  if (last_frame_.has_pose && !trajectory_.entries().empty()) {
+    const TrajectoryEntry& e = trajectory_.entries().back();
+    const map::Keyframe* ref = view.keyframe(e.reference);
+    if (ref != nullptr && !ref->bad && e.frame_index == last_frame_.index)
+      last_frame_.T_cw = e.T_c_ref * ref->T_cw;
+  }
+  if (map_.big_change_count() != big_changes_seen_) {
+    big_changes_seen_ = map_.big_change_count();
+    velocity_.reset();  // the old velocity mixes poses from before and after the correction
+  }
+}
+
+bool Tracker::track_motion_model(map::MapView& view, Frame& frame) {
+  frame.T_cw = *velocity_ * last_frame_.T_cw;
+  const MatchContext ctx{camera_, pyramid_, depth_.bf};
+  int matches = match_last_frame(view, frame, last_frame_, config_.motion_search_radius, ctx);
+  if (matches < config_.min_motion_matches) {
+    frame.reset_matches();
+    matches = match_last_frame(view, frame, last_frame_, 2.0 * config_.motion_search_radius, ctx);
+  }
+  if (matches < config_.min_motion_matches) return false;
+  frame.has_pose = true;
+  return optimize_pose(view, frame) >= 10;
+}
+
+bool Tracker::track_reference_keyframe(map::MapView& view, Frame& frame) {
+  const map::Keyframe* ref = view.keyframe(reference_);
+  if (ref == nullptr) return false;
+  frame.reset_matches();
+  const int matches = match_keyframe(view, frame, *ref, 0.7f);
+  if (matches < 15) return false;
+  frame.T_cw = last_frame_.has_pose ? last_frame_.T_cw : ref->T_cw;
+  frame.has_pose = true;
+  return optimize_pose(view, frame) >= 10;
+}
+
+int Tracker::optimize_pose(map::MapView& view, Frame& frame) {
+  std::vector<opt::PoseObservation> obs;
+  std::vector<std::size_t> feature_of;
+  for (std::size_t i = 0; i < frame.points.size(); ++i) {
+    if (frame.points[i] == map::kNoPoint) continue;
+    const map::MapPoint* p = view.live_point(frame.points[i]);
+    if (p == nullptr) {
+      frame.points[i] = map::kNoPoint;
+      continue;
+    }
+    const auto& kp = frame.features.keypoints[i];
+    opt::PoseObservation o;
+    o.point_w = p->position;
+    o.uv = {kp.pt.x, kp.pt.y};
+    o.u_right = frame.features.u_right[i];
+    o.inv_sigma2 = pyramid_.inv_level_sigma2[static_cast<std::size_t>(kp.octave)];
+    obs.push_back(o);
+    feature_of.push_back(i);
+  }
+  if (obs.size() < 3) return 0;
+  const auto result = opt::optimize_pose(frame.T_cw, obs, camera_model_, config_.pose);
+  int inliers = 0;
+  for (std::size_t k = 0; k < obs.size(); ++k) {
+    frame.outlier[feature_of[k]] = result.outlier[k];
+    if (!result.outlier[k]) ++inliers;
+  }
+  return inliers;
+}
+
+void Tracker::update_local_map(map::MapView& view, Frame& frame) {
+  // Local keyframes: those observing the frame's points, their best covisibles, children and parent.
+  std::map<map::KeyframeId, int> counter;
+  for (std::size_t i = 0; i < frame.points.size(); ++i) {
+    if (frame.points[i] == map::kNoPoint || frame.outlier[i]) continue;
+    const map::MapPoint* p = view.live_point(frame.points[i]);
+    if (p == nullptr) continue;
+    for (const auto& [kid, feature] : p->observations) ++counter[kid];
+  }
+  if (counter.empty()) return;
+  local_keyframes_.clear();
+  std::unordered_set<map::KeyframeId> in_local;
+  map::KeyframeId best = map::kNoKeyframe;
+  int best_count = 0;
+  for (const auto& [kid, count] : counter) {
+    const map::Keyframe* kf = view.keyframe(kid);
+    if (kf == nullptr || kf->bad) continue;
+    local_keyframes_.push_back(kid);
+    in_local.insert(kid);
+    if (count > best_count) {
+      best_count = count;
+      best = kid;
+    }
+  }
+  const std::size_t direct = local_keyframes_.size();
+  for (std::size_t k = 0; k < direct && local_keyframes_.size() < config_.max_local_keyframes; ++k) {
+    const map::KeyframeId kid = local_keyframes_[k];
+    std::vector<map::KeyframeId> neighbours = view.best_covisibles(kid, 10);
+    const map::Keyframe* kf = view.keyframe(kid);
+    neighbours.insert(neighbours.end(), kf->children.begin(), kf->children.end());
+    if (kf->parent != map::kNoKeyframe) neighbours.push_back(kf->parent);
+    for (map::KeyframeId n : neighbours) {
+      const map::Keyframe* nkf = view.keyframe(n);
+      if (nkf == nullptr || nkf->bad || in_local.contains(n)) continue;
+      local_keyframes_.push_back(n);
+      in_local.insert(n);
+      if (local_keyframes_.size() >= config_.max_local_keyframes) break;
+    }
+  }
+  if (best != map::kNoKeyframe) reference_ = best;
+  frame.reference = reference_;
+
+  local_points_.clear();
+  std::unordered_set<map::PointId> seen;
+  for (std::size_t i = 0; i < frame.points.size(); ++i) {
+    if (frame.points[i] != map::kNoPoint) seen.insert(frame.points[i]);
+  }
+  for (map::KeyframeId kid : local_keyframes_) {
+    for (map::PointId pid : view.keyframe(kid)->points) {
+      if (pid == map::kNoPoint || seen.contains(pid)) continue;
+      seen.insert(pid);
+      local_points_.push_back(pid);
+    }
+  }
+}
+
+bool Tracker::track_local_map(map::MapView& view, Frame& frame) {
+  update_local_map(view, frame);
+  // Matched points count as seen; the local search marks the rest it projects as visible.
+  for (std::size_t i = 0; i < frame.points.size(); ++i) {
+    if (frame.points[i] == map::kNoPoint) continue;
+    if (frame.outlier[i]) {
+      frame.points[i] = map::kNoPoint;
+      frame.outlier[i] = false;
+      continue;
+    }
+    if (map::MapPoint* p = view.live_point(frame.points[i])) ++p->visible;
+  }
+  const bool recently_relocalized = frame.index < last_reloc_frame_ + static_cast<std::size_t>(fps_);
+  const double factor =
+      recently_relocalized ? 2.0 * config_.local_search_factor : config_.local_search_factor;
+  match_local_points(view, frame, local_points_, factor, MatchContext{camera_, pyramid_, depth_.bf});
+  const int inliers = optimize_pose(view, frame);
+  for (std::size_t i = 0; i < frame.points.size(); ++i) {
+    if (frame.points[i] == map::kNoPoint || frame.outlier[i]) continue;
+    if (map::MapPoint* p = view.live_point(frame.points[i])) ++p->found;
+  }
+  const int needed =
+      recently_relocalized && relocalizations_ > 0 ? config_.min_inliers_after_reloc : config_.min_inliers;
+  return inliers >= needed;
+}
+
+bool Tracker::relocalize(map::MapView& view, Frame& frame) {
+  // Candidates: the most recent keyframes and the covisibles of the last reference (a BoW keyframe
+  // database replaces this when the loop module provides one).
+  std::vector<map::KeyframeId> ids = view.keyframe_ids_sorted();
+  std::vector<map::KeyframeId> candidates;
+  for (auto it = ids.rbegin(); it != ids.rend() && candidates.size() < config_.relocalization_candidates;
+       ++it) {
+    candidates.push_back(*it);
+  }
+  for (map::KeyframeId k : view.best_covisibles(reference_, 10)) {
+    if (std::find(candidates.begin(), candidates.end(), k) == candidates.end()) candidates.push_back(k);
+  }
+  for (map::KeyframeId kid : candidates) {
+    const map::Keyframe* kf = view.keyframe(kid);
+    if (kf == nullptr || kf->bad) continue;
+    frame.reset_matches();
+    if (match_keyframe(view, frame, *kf, 0.75f) < 15) continue;
+    std::vector<cv::Point3f> object;
+    std::vector<cv::Point2f> image;
+    std::vector<std::size_t> feature_of;
+    for (std::size_t i = 0; i < frame.points.size(); ++i) {
+      if (frame.points[i] == map::kNoPoint) continue;
+      const map::MapPoint* p = view.live_point(frame.points[i]);
+      if (p == nullptr) continue;
+      object.emplace_back(static_cast<float>(p->position.x()), static_cast<float>(p->position.y()),
+                          static_cast<float>(p->position.z()));
+      image.push_back(frame.features.keypoints[i].pt);
+      feature_of.push_back(i);
+    }
+    if (object.size() < 15) continue;
+    cv::Mat rvec, tvec;
+    std::vector<int> inliers;
+    cv::setRNGSeed(static_cast<int>(frame.index));  // deterministic RANSAC
+    const bool found = cv::solvePnPRansac(object, image, camera_.K(), cv::Mat(), rvec, tvec, false, 200, 4.0f,
+                                          0.99, inliers, cv::SOLVEPNP_EPNP);
+    if (!found || inliers.size() < 10) continue;
+    cv::Mat R;
+    cv::Rodrigues(rvec, R);
+    Eigen::Matrix3d Re;
+    Eigen::Vector3d te;
+    for (int r = 0; r < 3; ++r) {
+      for (int c = 0; c < 3; ++c) Re(r, c) = R.at<double>(r, c);
+      te(r) = tvec.at<double>(r);
+    }
+    frame.T_cw = geo::SE3(Eigen::Quaterniond(Re).normalized(), te);
+    frame.has_pose = true;
+    if (optimize_pose(view, frame) < 10) continue;
+    // Recover more matches by projection before accepting.
+    update_local_map(view, frame);
+    match_local_points(view, frame, local_points_, 2.0 * config_.local_search_factor,
+                       MatchContext{camera_, pyramid_, depth_.bf});
+    if (optimize_pose(view, frame) >= config_.min_inliers_after_reloc) {
+      reference_ = kid;
+      last_reloc_frame_ = frame.index;
+      ++relocalizations_;
+      spdlog::info("relocalised frame {} against keyframe {}", frame.index, kid);
+      return true;
+    }
+  }
+  frame.has_pose = false;
+  return false;
+}
+
+bool Tracker::need_keyframe(map::MapView& view, const Frame& frame, const MappingStatus& mapping) const {
+  KeyframeCandidate c;
+  c.frames_since_keyframe = frame.index - last_keyframe_frame_;
+  c.fps = fps_;
+  c.tracked_inliers = frame.matched();
+  c.keyframes_in_map = view.live_keyframes();
+  c.reference_tracked = view.tracked_points(reference_, c.keyframes_in_map <= 2 ? 2 : 3);
+  c.mapping_idle = mapping.idle;
+  c.mapping_queue = mapping.queue;
+  c.image_width = camera_.width;
+  c.image_height = camera_.height;
+  for (std::size_t i = 0; i < frame.features.size(); ++i) {
+    const float d = frame.features.depth[i];
+    if (d <= 0 || d > depth_.close_depth) continue;
+    if (frame.points[i] != map::kNoPoint && !frame.outlier[i]) {
+      ++c.close_tracked;
+    } else {
+      ++c.close_untracked;
+    }
+  }
+  if (policy_->needs_view_changes()) {
+    const map::Keyframe* ref = view.keyframe(reference_);
+    const Eigen::Vector3d c_now = frame.camera_center();
+    const Eigen::Vector3d c_ref = ref->camera_center();
+    for (std::size_t i = 0; i < frame.points.size(); ++i) {
+      if (frame.points[i] == map::kNoPoint || frame.outlier[i]) continue;
+      const map::MapPoint* p = view.live_point(frame.points[i]);
+      if (p == nullptr) continue;
+      const Eigen::Vector3d a = (p->position - c_now).normalized();
+      const Eigen::Vector3d b = (p->position - c_ref).normalized();
+      const double angle = std::acos(std::clamp(a.dot(b), -1.0, 1.0)) * 180.0 / M_PI;
+      c.view_changes.push_back(
+          {frame.features.keypoints[i].pt.x, frame.features.keypoints[i].pt.y, static_cast<float>(angle)});
+    }
+  }
+  return policy_->decide(c);
+}
+
+map::KeyframeId Tracker::create_keyframe(map::MapView& view, Frame& frame) {
+  map::Keyframe kf;
+  kf.frame_index = frame.index;
+  kf.stamp = frame.stamp;
+  kf.T_cw = frame.T_cw;
+  kf.features = frame.features;
+  kf.index = map::FeatureIndex(kf.features.keypoints, camera_.width, camera_.height);
+  kf.thumbnail = frame.thumbnail;
+  kf.points.assign(frame.features.size(), map::kNoPoint);
+  for (std::size_t i = 0; i < frame.points.size(); ++i) {
+    if (frame.points[i] != map::kNoPoint && !frame.outlier[i]) kf.points[i] = frame.points[i];
+  }
+  const map::KeyframeId kid = view.add_keyframe(std::move(kf));
+  map::Keyframe* stored = view.keyframe(kid);
+
+  // RGB-D: new points straight from depth, closest first; all close ones and at least new_points_min.
+  std::vector<std::size_t> order(frame.features.size());
+  std::iota(order.begin(), order.end(), 0);
+  std::sort(order.begin(), order.end(),
+            [&](std::size_t a, std::size_t b) { return frame.features.depth[a] < frame.features.depth[b]; });
+  const geo::SE3 T_wc = frame.T_cw.inverse();
+  int created = 0;
+  for (std::size_t i : order) {
+    const float d = frame.features.depth[i];
+    if (d <= 0) continue;
+    if (d > depth_.close_depth && created >= config_.new_points_min) break;
+    if (stored->points[i] != map::kNoPoint) continue;
+    const auto& kp = frame.features.keypoints[i];
+    map::MapPoint p;
+    p.position = T_wc * camera_.unproject({kp.pt.x, kp.pt.y}, d);
+    p.descriptor = frame.features.descriptors.row(static_cast<int>(i)).clone();
+    p.reference = kid;
+    p.first_keyframe = kid;
+    const map::PointId pid = view.add_point(std::move(p));
+    view.add_observation(pid, kid, static_cast<int>(i));
+    view.update_point_normal_and_depth(pid, pyramid_);
+    frame.points[i] = pid;
+    frame.outlier[i] = false;
+    ++created;
+  }
+  view.update_connections(kid);
+  reference_ = kid;
+  last_keyframe_frame_ = frame.index;
+  return kid;
+}
+
+}  // namespace sp::track

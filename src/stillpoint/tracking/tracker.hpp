@@ -1,0 +1,98 @@
+#pragma once
+// Frame-to-map tracking: constant-velocity prediction, reference-keyframe fallback, relocalisation,
+// local-map tracking and the keyframe decision. Runs in the tracking thread; touches the map only
+// through short MapViews.
+#include <memory>
+#include <optional>
+#include <vector>
+
+#include "stillpoint/map/map.hpp"
+#include "stillpoint/optimize/pose_optimizer.hpp"
+#include "stillpoint/tracking/frame.hpp"
+#include "stillpoint/tracking/keyframe_policy.hpp"
+#include "stillpoint/tracking/trajectory_recorder.hpp"
+
+namespace sp::track {
+
+struct TrackerConfig {
+  int init_min_features = 300;        // features with valid depth needed to start the map
+  double motion_search_radius = 7.0;  // px at level 0, constant-velocity projection search
+  int min_motion_matches = 20;        // below: fall back to the reference keyframe
+  double local_search_factor = 3.0;   // ORB-SLAM's RGB-D window factor for local-map search
+  int min_inliers = 30;               // local-map inliers for a frame to count as tracked
+  int min_inliers_after_reloc = 50;   // ... for one second after relocalisation
+  std::size_t max_local_keyframes = 80;
+  int new_points_min = 100;  // close-depth points created per keyframe at least
+  std::size_t relocalization_candidates = 20;
+  opt::PoseOptimizerConfig pose;
+  KeyframePolicyConfig keyframes;
+  static TrackerConfig from_yaml(const ConfigReader& r);
+};
+
+enum class TrackingState { NotInitialized, Ok, Lost };
+const char* to_string(TrackingState s);
+
+struct MappingStatus {
+  bool idle = true;
+  std::size_t queue = 0;
+};
+
+struct TrackOutcome {
+  TrackingState state = TrackingState::NotInitialized;
+  map::KeyframeId new_keyframe = map::kNoKeyframe;
+  int inliers = 0;
+  bool relocalized = false;
+};
+
+class Tracker {
+ public:
+  Tracker(map::Map& map, TrackerConfig config, geo::CameraIntrinsics camera, DepthModel depth,
+          map::ScalePyramid pyramid, double fps);
+
+  TrackOutcome track(Frame& frame, const MappingStatus& mapping);
+
+  [[nodiscard]] TrackingState state() const { return state_; }
+  [[nodiscard]] std::size_t lost_frames() const { return lost_frames_; }
+  [[nodiscard]] std::size_t relocalizations() const { return relocalizations_; }
+  [[nodiscard]] const TrajectoryRecorder& trajectory() const { return trajectory_; }
+  [[nodiscard]] const KeyframePolicy& policy() const { return *policy_; }
+  // Camera motion from the previous frame to the next one by the constant-velocity model (T_cur_prev).
+  [[nodiscard]] std::optional<geo::SE3> predicted_motion() const { return velocity_; }
+
+ private:
+  bool initialize(map::MapView& view, Frame& frame);
+  bool track_motion_model(map::MapView& view, Frame& frame);
+  bool track_reference_keyframe(map::MapView& view, Frame& frame);
+  bool relocalize(map::MapView& view, Frame& frame);
+  bool track_local_map(map::MapView& view, Frame& frame);
+  int optimize_pose(map::MapView& view, Frame& frame);
+  void update_local_map(map::MapView& view, Frame& frame);
+  void refresh_last_frame(map::MapView& view);
+  [[nodiscard]] bool need_keyframe(map::MapView& view, const Frame& frame,
+                                   const MappingStatus& mapping) const;
+  map::KeyframeId create_keyframe(map::MapView& view, Frame& frame);
+
+  map::Map& map_;
+  TrackerConfig config_;
+  geo::CameraIntrinsics camera_;
+  DepthModel depth_;
+  map::ScalePyramid pyramid_;
+  double fps_;
+  std::unique_ptr<KeyframePolicy> policy_;
+  opt::CameraModel camera_model_;
+
+  TrackingState state_ = TrackingState::NotInitialized;
+  Frame last_frame_;
+  std::optional<geo::SE3> velocity_;  // T_cur_last of the last tracked step
+  map::KeyframeId reference_ = map::kNoKeyframe;
+  std::size_t last_keyframe_frame_ = 0;
+  std::size_t last_reloc_frame_ = 0;
+  std::uint64_t big_changes_seen_ = 0;
+  std::vector<map::KeyframeId> local_keyframes_;
+  std::vector<map::PointId> local_points_;
+  std::size_t lost_frames_ = 0;
+  std::size_t relocalizations_ = 0;
+  TrajectoryRecorder trajectory_;
+};
+
+}  // namespace sp::track
