@@ -1,8 +1,7 @@
-#include "stillpoint/optimize/pose_optimizer.hpp"
-
 #include <gtest/gtest.h>
 
 #include "stillpoint/common/error.hpp"
+#include "stillpoint/optimize/pose_optimizer.hpp"
 #include "synthetic.hpp"
 
 namespace sp::opt {

@@ -1,15 +1,14 @@
 // Analytic Jacobians of every residual against central differences through the manifold increment.
-#include "stillpoint/optimize/residuals.hpp"
-
 #include <gtest/gtest.h>
 
+#include "stillpoint/optimize/residuals.hpp"
 #include "synthetic.hpp"
 
 namespace sp::opt {
 namespace {
 
-Reprojection eval(const CameraModel& cam, const geo::SE3& T, const Eigen::Vector3d& p, const Eigen::Vector2d& uv,
-                  double u_right, double s) {
+Reprojection eval(const CameraModel& cam, const geo::SE3& T, const Eigen::Vector3d& p,
+                  const Eigen::Vector2d& uv, double u_right, double s) {
   return evaluate_reprojection(cam, T.rotation(), T.translation(), p, uv, u_right, s, true, true);
 }
 
@@ -35,7 +34,8 @@ void check_reprojection_jacobians(double u_right) {
     for (int k = 0; k < 3; ++k) {
       const Eigen::Vector3d d = Eigen::Vector3d::Unit(k) * h;
       Jpoint_num.col(k) =
-          (eval(cam, T, p + d, uv, u_right, s).residual - eval(cam, T, p - d, uv, u_right, s).residual) / (2 * h);
+          (eval(cam, T, p + d, uv, u_right, s).residual - eval(cam, T, p - d, uv, u_right, s).residual) /
+          (2 * h);
     }
     const double scale = Jpose_num.norm();
     EXPECT_GT(scale, 1.0);

@@ -95,8 +95,13 @@ PoseOptimizationResult optimize_pose(geo::SE3& T_cw, const std::vector<PoseObser
   std::vector<double> sqrt_info(n);
   for (std::size_t i = 0; i < n; ++i) sqrt_info[i] = std::sqrt(std::max(observations[i].inv_sigma2, 0.0));
 
-  Problem p{observations, sqrt_info, result.outlier, camera, std::sqrt(config.chi2_mono),
-            std::sqrt(config.chi2_stereo), true};
+  Problem p{observations,
+            sqrt_info,
+            result.outlier,
+            camera,
+            std::sqrt(config.chi2_mono),
+            std::sqrt(config.chi2_stereo),
+            true};
   for (int round = 0; round < config.rounds; ++round) {
     // The robust kernel is dropped in the last round: by then the outliers are out.
     p.robust = round + 1 < config.rounds;
@@ -107,8 +112,8 @@ PoseOptimizationResult optimize_pose(geo::SE3& T_cw, const std::vector<PoseObser
     result.inliers = 0;
     for (std::size_t i = 0; i < n; ++i) {
       const PoseObservation& o = observations[i];
-      const Reprojection rep =
-          evaluate_reprojection(camera, R, T_cw.translation(), o.point_w, o.uv, o.u_right, sqrt_info[i], false, false);
+      const Reprojection rep = evaluate_reprojection(camera, R, T_cw.translation(), o.point_w, o.uv,
+                                                     o.u_right, sqrt_info[i], false, false);
       const double threshold = rep.dim == 2 ? config.chi2_mono : config.chi2_stereo;
       result.outlier[i] = rep.depth <= 0 || rep.chi2() > threshold;
       if (!result.outlier[i]) ++result.inliers;

@@ -19,9 +19,9 @@ struct PoseObservation {
 };
 
 struct PoseOptimizerConfig {
-  int rounds = 4;             // outlier re-classification rounds, [1, 20]
-  int iterations = 10;        // LM iterations per round, [1, 100]
-  double chi2_mono = 5.991;   // chi-square threshold, 2 dof (95 %), [0.1, 1000]
+  int rounds = 4;              // outlier re-classification rounds, [1, 20]
+  int iterations = 10;         // LM iterations per round, [1, 100]
+  double chi2_mono = 5.991;    // chi-square threshold, 2 dof (95 %), [0.1, 1000]
   double chi2_stereo = 7.815;  // chi-square threshold, 3 dof (95 %), [0.1, 1000]
   static PoseOptimizerConfig from_yaml(const ConfigReader& r);
 };

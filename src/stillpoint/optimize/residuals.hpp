@@ -6,7 +6,6 @@
 // updated on the LEFT, T_cw <- exp(delta) * T_cw, delta = [rho; phi] as in geo::SE3::exp. All pose
 // Jacobians below are derivatives with respect to that delta at delta = 0.
 #include <Eigen/Core>
-
 #include <cmath>
 
 #include "stillpoint/geometry/lie.hpp"
