@@ -124,9 +124,8 @@ void draw_series(cv::Mat& img, const Axis& x, const Axis& y, const std::vector<d
 
 void write_plot(const std::filesystem::path& png, const EvalResult& r) {
   if (r.gt_positions.empty()) throw Error("write_plot: nothing to plot");
-  constexpr int W = 1000, H = 1160;
+  constexpr int W = 1000;
   constexpr int left = 95, right = W - 30;
-  cv::Mat img(H, W, CV_8UC3, kWhite);
 
   // The two axes along which the ground truth spreads most make the top view.
   Eigen::Vector3d mean = Eigen::Vector3d::Zero();
@@ -146,8 +145,12 @@ void write_plot(const std::filesystem::path& png, const EvalResult& r) {
       ylo = std::min(ylo, p[ay]), yhi = std::max(yhi, p[ay]);
     }
   }
-  // Equal scale on both axes, centred, with a margin.
-  const cv::Rect top(left, 60, right - left, 700);
+  // Equal scale on both axes, centred, with a margin; the panel's height follows the data's aspect.
+  const double aspect = (yhi - ylo + 1e-9) / (xhi - xlo + 1e-9);
+  const int top_h = std::clamp(static_cast<int>((right - left) * aspect), 360, 760);
+  const cv::Rect top(left, 60, right - left, top_h);
+  const cv::Rect bottom(left, top.br().y + 90, right - left, 230);
+  cv::Mat img(bottom.br().y + 60, W, CV_8UC3, kWhite);
   const double span = std::max({(xhi - xlo) / top.width, (yhi - ylo) / top.height, 1e-6 / top.width}) * 1.08;
   const double xc = 0.5 * (xlo + xhi), yc = 0.5 * (ylo + yhi);
   const Axis X{xc - span * top.width / 2, xc + span * top.width / 2, top.x, top.br().x};
@@ -175,7 +178,6 @@ void write_plot(const std::filesystem::path& png, const EvalResult& r) {
               {{"ground truth (o = start)", kGt, 2}, {align, kEst, 2}, {"ATE error", kErr, 1}});
 
   // Errors over time, seconds from the first associated pose.
-  const cv::Rect bottom(left, 850, right - left, 230);
   const double t0 = r.stamps.front();
   double t_end = r.stamps.back() - t0, e_max = r.ate.max;
   if (!r.rpe_stamps.empty()) {

@@ -1,0 +1,143 @@
+#include <gtest/gtest.h>
+
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "stillpoint/common/error.hpp"
+#include "stillpoint/io/tum_sequence.hpp"
+#include "stillpoint/io/tum_text.hpp"
+#include "test_util.hpp"
+
+namespace sp::io {
+namespace {
+
+namespace fs = std::filesystem;
+const fs::path kSeq = SP_SHARED_DIR "/data/dynsynth/office_a_static_xyz_150";
+
+TEST(TumSequence, ReadsTheWholeSharedSequence) {
+  TumSequence seq(kSeq);
+  const auto assoc = read_tum_text(kSeq / "associations.txt", 4);
+  ASSERT_EQ(seq.size_hint(), 150u);
+  ASSERT_EQ(assoc.size(), 150u);
+  EXPECT_DOUBLE_EQ(seq.camera().intrinsics.fx, 535.4);
+  ASSERT_TRUE(seq.groundtruth_path().has_value());
+  EXPECT_EQ(*seq.groundtruth_path(), kSeq / "groundtruth.txt");
+
+  std::size_t n = 0;
+  double last = -1;
+  while (auto f = seq.next()) {
+    EXPECT_EQ(f->index, n);
+    EXPECT_DOUBLE_EQ(f->stamp, assoc[n].stamp);
+    EXPECT_NEAR(f->depth_stamp, f->stamp, 0.02);
+    EXPECT_GT(f->stamp, last);
+    last = f->stamp;
+    ASSERT_EQ(f->bgr.type(), CV_8UC3);
+    ASSERT_EQ(f->depth.type(), CV_32FC1);
+    EXPECT_EQ(f->bgr.size(), cv::Size(640, 480));
+    EXPECT_EQ(f->depth.size(), cv::Size(640, 480));
+    if (n % 50 == 0) {
+      // Metres: an office seen from a desk is 0.3–8 m away; most pixels have a reading.
+      const cv::Mat valid = f->depth > 0;
+      EXPECT_GT(cv::countNonZero(valid), 640 * 480 / 2);
+      double lo = 0, hi = 0;
+      cv::minMaxLoc(f->depth, &lo, &hi, nullptr, nullptr, valid);
+      EXPECT_GE(lo, 0.1);
+      EXPECT_LE(hi, 8.0);
+      EXPECT_GT(cv::mean(f->depth, valid)[0], 0.5);
+      // Exactly raw / 5000.
+      const cv::Mat raw = cv::imread((kSeq / assoc[n].columns[3]).string(), cv::IMREAD_UNCHANGED);
+      EXPECT_FLOAT_EQ(f->depth.at<float>(240, 320), raw.at<std::uint16_t>(240, 320) / 5000.0f);
+    }
+    ++n;
+  }
+  EXPECT_EQ(n, 150u);
+  EXPECT_EQ(seq.skipped_frames(), 0u);
+  EXPECT_FALSE(seq.next().has_value());  // stays at the end
+}
+
+TEST(TumSequence, StartAndMaxFramesSelectAWindow) {
+  TumSequenceOptions o;
+  o.start_frame = 5;
+  o.max_frames = 4;
+  o.prefetch = 1;
+  TumSequence seq(kSeq, o);
+  EXPECT_EQ(seq.size_hint(), 4u);
+  std::vector<std::size_t> idx;
+  while (auto f = seq.next()) idx.push_back(f->index);
+  EXPECT_EQ(idx, (std::vector<std::size_t>{5, 6, 7, 8}));
+}
+
+TEST(TumSequence, DestructorStopsTheReaderMidSequence) {
+  TumSequenceOptions o;
+  o.prefetch = 2;
+  for (int k = 0; k < 3; ++k) {
+    TumSequence seq(kSeq, o);
+    ASSERT_TRUE(seq.next().has_value());
+  }  // would hang here if the reader stayed blocked on the full queue
+  SUCCEED();
+}
+
+// A 10-frame copy without associations.txt (so rgb.txt/depth.txt are associated), with frame 3's colour
+// image corrupt, frame 6's depth missing and frame 8's depth of the wrong size.
+fs::path damaged_copy() {
+  const fs::path dir = test::scratch_dir();
+  fs::create_directories(dir / "rgb");
+  fs::create_directories(dir / "depth");
+  fs::copy_file(kSeq / "camera.yaml", dir / "camera.yaml");
+  const auto assoc = read_tum_text(kSeq / "associations.txt", 4);
+  std::string rgb = "# color images\n", depth = "# depth maps\n";
+  for (std::size_t k = 0; k < 10; ++k) {
+    rgb += assoc[k].columns[0] + " " + assoc[k].columns[1] + "\n";
+    depth += assoc[k].columns[2] + " " + assoc[k].columns[3] + "\n";
+    fs::copy_file(kSeq / assoc[k].columns[1], dir / assoc[k].columns[1]);
+    if (k != 6) fs::copy_file(kSeq / assoc[k].columns[3], dir / assoc[k].columns[3]);
+  }
+  test::write_text(dir / "rgb.txt", rgb);
+  test::write_text(dir / "depth.txt", depth);
+  test::write_text(dir / assoc[3].columns[1], "this is not a jpeg");
+  const cv::Mat d = cv::imread((kSeq / assoc[8].columns[3]).string(), cv::IMREAD_UNCHANGED);
+  cv::Mat small;
+  cv::resize(d, small, cv::Size(320, 240), 0, 0, cv::INTER_NEAREST);
+  cv::imwrite((dir / assoc[8].columns[3]).string(), small);
+  return dir;
+}
+
+TEST(TumSequence, BadFramesAreSkippedCountedAndTheRunGoesOn) {
+  const fs::path dir = damaged_copy();
+  TumSequence seq(dir);
+  EXPECT_EQ(seq.size_hint(), 10u);
+  EXPECT_FALSE(seq.groundtruth_path().has_value());
+  std::vector<std::size_t> idx;
+  while (auto f = seq.next()) {
+    idx.push_back(f->index);
+    EXPECT_FALSE(f->depth.empty());
+  }
+  EXPECT_EQ(idx, (std::vector<std::size_t>{0, 1, 2, 4, 5, 7, 9}));
+  EXPECT_EQ(seq.skipped_frames(), 3u);
+}
+
+TEST(TumSequence, CameraFileOptionAndMissingCamera) {
+  const fs::path dir = damaged_copy();
+  fs::remove(dir / "camera.yaml");
+  EXPECT_THROW(TumSequence seq(dir), InputError);
+  TumSequenceOptions o;
+  o.camera_file = fs::path(SP_SOURCE_DIR "/config/camera/dynsynth.yaml");
+  TumSequence seq(dir, o);
+  EXPECT_DOUBLE_EQ(seq.camera().intrinsics.cx, 320.1);
+  EXPECT_THROW(TumSequence bad(dir / "nope"), InputError);
+}
+
+TEST(TumSequence, MalformedListIsAnErrorAtConstruction) {
+  const fs::path dir = damaged_copy();
+  test::write_text(dir / "rgb.txt", "1.0 rgb/a.jpg\n0.5 rgb/b.jpg\n");
+  try {
+    TumSequence seq(dir);
+    ADD_FAILURE() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_EQ(e.line(), 2);
+    EXPECT_EQ(e.file(), (dir / "rgb.txt").string());
+  }
+}
+
+}  // namespace
+}  // namespace sp::io
