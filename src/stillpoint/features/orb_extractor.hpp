@@ -7,6 +7,7 @@
 
 #include "stillpoint/common/config_reader.hpp"
 #include "stillpoint/features/orb_pattern.hpp"
+#include "stillpoint/features/quadtree.hpp"
 
 namespace sp::feat {
 
@@ -68,6 +69,12 @@ class OrbExtractor {
   std::vector<cv::Size> level_size_;
   std::vector<std::vector<cv::KeyPoint>> level_kps_;
   std::vector<cv::Mat> level_desc_;
+  struct LevelScratch {
+    std::vector<cv::KeyPoint> found, cell_found;
+    std::vector<int> cell_count;
+    QuadtreeScratch quadtree;
+  };
+  std::vector<LevelScratch> scratch_;
 };
 
 }  // namespace sp::feat

@@ -54,20 +54,23 @@ void distribute_quadtree(const std::vector<cv::KeyPoint>& kps, int target, float
   const int n_roots = std::max(1, static_cast<int>(std::lround(w / h)));
   const float root_w = w / static_cast<float>(n_roots);
   s.nodes.clear();
-  std::sort(s.order.begin(), s.order.end(), [&](int a, int b) {
-    return kps[static_cast<std::size_t>(a)].pt.x < kps[static_cast<std::size_t>(b)].pt.x ||
-           (kps[static_cast<std::size_t>(a)].pt.x == kps[static_cast<std::size_t>(b)].pt.x && a < b);
-  });
-  {
+  if (n_roots == 1) {
+    s.nodes.push_back({x0, y0, x1, y1, 0, static_cast<int>(s.order.size())});
+  } else {
+    // Stable grouping of the indices by root column.
+    const auto root_of = [&](int i) {
+      const float rx = (kps[static_cast<std::size_t>(i)].pt.x - x0) / root_w;
+      return std::min(n_roots - 1, static_cast<int>(rx));
+    };
+    std::stable_sort(s.order.begin(), s.order.end(), [&](int a, int b) { return root_of(a) < root_of(b); });
     int begin = 0;
     const int total = static_cast<int>(s.order.size());
     for (int r = 0; r < n_roots; ++r) {
-      const float rx1 = r + 1 == n_roots ? x1 : x0 + root_w * static_cast<float>(r + 1);
       int end = begin;
-      while (end < total && kps[static_cast<std::size_t>(s.order[static_cast<std::size_t>(end)])].pt.x < rx1)
-        ++end;
-      if (r + 1 == n_roots) end = total;
-      if (end > begin) s.nodes.push_back({x0 + root_w * static_cast<float>(r), y0, rx1, y1, begin, end});
+      while (end < total && root_of(s.order[static_cast<std::size_t>(end)]) == r) ++end;
+      const float rx0 = x0 + root_w * static_cast<float>(r);
+      const float rx1 = r + 1 == n_roots ? x1 : x0 + root_w * static_cast<float>(r + 1);
+      if (end > begin) s.nodes.push_back({rx0, y0, rx1, y1, begin, end});
       begin = end;
     }
   }
@@ -80,24 +83,24 @@ void distribute_quadtree(const std::vector<cv::KeyPoint>& kps, int target, float
     for (const Node& n : s.nodes) expandable += count(n) > 1 ? 1 : 0;
     if (expandable == 0) break;
     if (s.nodes.size() + 3 * expandable > target_sz) {
-      // Last step: split the most crowded leaves first until the target is reached.
-      while (s.nodes.size() < target_sz) {
-        std::sort(s.nodes.begin(), s.nodes.end(), [&](const Node& a, const Node& b) {
-          if (count(a) != count(b)) return count(a) > count(b);
-          if (a.y0 != b.y0) return a.y0 < b.y0;
-          return a.x0 < b.x0;
-        });
-        if (count(s.nodes.front()) <= 1) break;
+      // Last step: split the most crowded leaves first until the target is reached (a max-heap
+      // on the count; ties by position so that the result is deterministic).
+      const auto less_crowded = [&](const Node& a, const Node& b) {
+        if (count(a) != count(b)) return count(a) < count(b);
+        if (a.y0 != b.y0) return a.y0 > b.y0;
+        return a.x0 > b.x0;
+      };
+      std::make_heap(s.nodes.begin(), s.nodes.end(), less_crowded);
+      while (s.nodes.size() < target_sz && count(s.nodes.front()) > 1) {
+        std::pop_heap(s.nodes.begin(), s.nodes.end(), less_crowded);
+        const Node top = s.nodes.back();
+        s.nodes.pop_back();
         s.next.clear();
-        std::size_t i = 0;
-        std::size_t total = s.nodes.size();
-        for (; i < s.nodes.size() && count(s.nodes[i]) > 1 && total < target_sz; ++i) {
-          const std::size_t before = s.next.size();
-          split(s.nodes[i], kps, s.order, s.next);
-          total += s.next.size() - before - 1;
+        split(top, kps, s.order, s.next);
+        for (const Node& c : s.next) {
+          s.nodes.push_back(c);
+          std::push_heap(s.nodes.begin(), s.nodes.end(), less_crowded);
         }
-        s.next.insert(s.next.end(), s.nodes.begin() + static_cast<std::ptrdiff_t>(i), s.nodes.end());
-        std::swap(s.nodes, s.next);
       }
       break;
     }
