@@ -101,6 +101,14 @@ std::unique_ptr<KeyframePolicy> make_keyframe_policy(const KeyframePolicyConfig&
   throw Error("unknown keyframe policy '" + config.policy + "'");
 }
 
+double viewing_angle_change_deg(const Eigen::Vector3d& point, const Eigen::Vector3d& center_ref,
+                                const Eigen::Vector3d& center_now) {
+  const Eigen::Vector3d a = (point - center_ref).normalized();
+  const Eigen::Vector3d b = (point - center_now).normalized();
+  // atan2 of |a x b| and a.b stays accurate for tiny and near-180 degree angles.
+  return std::atan2(a.cross(b).norm(), a.dot(b)) * 180.0 / M_PI;
+}
+
 Eigen::Matrix3i effective_point_grid(const std::vector<ViewChange>& changes, int width, int height,
                                      double min_angle_deg) {
   Eigen::Matrix3i grid = Eigen::Matrix3i::Zero();

@@ -62,6 +62,9 @@ struct GridBalance {
   [[nodiscard]] bool spread_out() const { return t2 > t1; }
 };
 GridBalance grid_balance(const Eigen::Matrix3i& counts);
+// Angle (degrees) between the rays from two camera centres to a point: how much its view changed.
+double viewing_angle_change_deg(const Eigen::Vector3d& point, const Eigen::Vector3d& center_ref,
+                                const Eigen::Vector3d& center_now);
 Eigen::Matrix3i effective_point_grid(const std::vector<ViewChange>& changes, int width, int height,
                                      double min_angle_deg);
 

@@ -358,9 +358,7 @@ bool Tracker::need_keyframe(map::MapView& view, const Frame& frame, const Mappin
       if (frame.points[i] == map::kNoPoint || frame.outlier[i]) continue;
       const map::MapPoint* p = view.live_point(frame.points[i]);
       if (p == nullptr) continue;
-      const Eigen::Vector3d a = (p->position - c_now).normalized();
-      const Eigen::Vector3d b = (p->position - c_ref).normalized();
-      const double angle = std::acos(std::clamp(a.dot(b), -1.0, 1.0)) * 180.0 / M_PI;
+      const double angle = viewing_angle_change_deg(p->position, c_ref, c_now);
       c.view_changes.push_back(
           {frame.features.keypoints[i].pt.x, frame.features.keypoints[i].pt.y, static_cast<float>(angle)});
     }
