@@ -106,6 +106,13 @@ class DynamicFeatureFilter {
   };
 
   std::vector<Detection> carry_boxes(const Detections& d, std::size_t to_frame) const;
+  // Fill res.flow_residual and eps (per-point threshold) from the points `fit` (static candidates).
+  // Reprojection: camera motion by PnP-RANSAC on depth; false when it cannot be estimated.
+  bool reprojection_residuals(const DynamicInput& in, const std::vector<int>& fit, DynamicResult& res,
+                              std::vector<float>& eps) const;
+  // Epipolar distance to an F fitted by RANSAC, or the homography transfer error when a homography
+  // explains the motion as well (static or rotating camera, far scene: F is degenerate there).
+  void epipolar_residuals(const std::vector<int>& fit, DynamicResult& res, std::vector<float>& eps) const;
 
   MotionCheckConfig cfg_;
   std::vector<bool> always_dynamic_;  // class id -> always dynamic

@@ -1,0 +1,60 @@
+#include "stillpoint/common/error.hpp"
+#include "stillpoint/dynamic/dynamic_filter.hpp"
+
+namespace sp::dyn {
+
+CullMode parse_cull_mode(const std::string& s) {
+  if (s == "off") return CullMode::kOff;
+  if (s == "detector_only") return CullMode::kDetectorOnly;
+  if (s == "flow_only") return CullMode::kFlowOnly;
+  if (s == "detector_flow") return CullMode::kDetectorFlow;
+  throw Error("unknown dynamic culling mode '" + s + "' (off | detector_only | flow_only | detector_flow)");
+}
+
+const char* to_string(CullMode m) {
+  switch (m) {
+    case CullMode::kOff:
+      return "off";
+    case CullMode::kDetectorOnly:
+      return "detector_only";
+    case CullMode::kFlowOnly:
+      return "flow_only";
+    case CullMode::kDetectorFlow:
+      return "detector_flow";
+  }
+  return "?";
+}
+
+MotionCheckConfig MotionCheckConfig::from_yaml(const ConfigReader& r) {
+  MotionCheckConfig c;
+  std::string mode = to_string(c.mode);
+  r.read_choice("mode", mode, {"off", "detector_only", "flow_only", "detector_flow"});
+  c.mode = parse_cull_mode(mode);
+  r.read_choice("residual", c.residual, {"auto", "epipolar", "reprojection"});
+  r.read("lk_window", c.lk_window, 5, 61);
+  r.read("lk_levels", c.lk_levels, 0, 6);
+  r.read("max_points", c.max_points, 20, 5000);
+  r.read("grid_cell_px", c.grid_cell_px, 4, 200);
+  r.read("fb_max_px", c.fb_max_px, 0.1, 10.0);
+  r.read("epsilon_epipolar_px", c.epsilon_epipolar_px, 0.1, 20.0);
+  r.read("epsilon_reprojection_px", c.epsilon_reprojection_px, 0.1, 50.0);
+  r.read("ransac_threshold_px", c.ransac_threshold_px, 0.1, 20.0);
+  r.read("ransac_confidence", c.ransac_confidence, 0.5, 0.9999);
+  r.read("ransac_iterations", c.ransac_iterations, 10, 10000);
+  r.read("min_static_points", c.min_static_points, 8, 1000);
+  r.read("moving_ratio_threshold", c.moving_ratio_threshold, 0.0, 1.0);
+  r.read("min_points_to_decide", c.min_points_to_decide, 1, 1000);
+  r.read("always_dynamic_classes", c.always_dynamic_classes);
+  r.read("dynamic_hold_frames", c.dynamic_hold_frames, 0, 1000);
+  r.read("keep_background_in_box", c.keep_background_in_box);
+  r.read("background_depth_margin_m", c.background_depth_margin_m, 0.05, 10.0);
+  r.read("cull_unboxed_movers", c.cull_unboxed_movers);
+  r.read("unboxed_radius_px", c.unboxed_radius_px, 1.0, 200.0);
+  r.read("cluster_radius_px", c.cluster_radius_px, 1.0, 500.0);
+  r.read("cluster_min_points", c.cluster_min_points, 1, 100);
+  r.read("box_margin_px", c.box_margin_px, 0.0, 100.0);
+  r.read("max_history_frames", c.max_history_frames, 1, 100);
+  return c;
+}
+
+}  // namespace sp::dyn

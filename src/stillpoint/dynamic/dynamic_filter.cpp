@@ -1,0 +1,356 @@
+#include "stillpoint/dynamic/dynamic_filter.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <opencv2/imgproc.hpp>
+#include <opencv2/video/tracking.hpp>
+#include <unordered_map>
+
+#include "stillpoint/common/error.hpp"
+#include "stillpoint/common/timing.hpp"
+#include "stillpoint/dynamic/decoders.hpp"
+
+namespace sp::dyn {
+
+namespace {
+
+float median_of(std::vector<float> v) {
+  if (v.empty()) return 0.f;
+  const auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
+  std::nth_element(v.begin(), mid, v.end());
+  return *mid;
+}
+
+float quantile_of(std::vector<float> v, double q) {
+  if (v.empty()) return 0.f;
+  const auto k = static_cast<std::ptrdiff_t>(q * static_cast<double>(v.size() - 1));
+  std::nth_element(v.begin(), v.begin() + k, v.end());
+  return v[static_cast<std::size_t>(k)];
+}
+
+cv::Rect2f grow(const cv::Rect2f& r, float m) {
+  return {r.x - m, r.y - m, r.width + 2 * m, r.height + 2 * m};
+}
+
+bool inside(const cv::Rect2f& r, const cv::Point2f& p) {
+  return p.x >= r.x && p.y >= r.y && p.x < r.x + r.width && p.y < r.y + r.height;
+}
+
+float raw_depth(const cv::Mat* depth, const cv::Point2f& p) {
+  if (depth == nullptr || depth->empty()) return 0.f;
+  const int u = static_cast<int>(std::lround(p.x)), v = static_cast<int>(std::lround(p.y));
+  if (u < 0 || v < 0 || u >= depth->cols || v >= depth->rows) return 0.f;
+  const float z = depth->at<float>(v, u);
+  return z > 0.f && std::isfinite(z) ? z : 0.f;
+}
+
+// Points to track: the strongest keypoint per grid cell (spread over the image), or corners.
+std::vector<cv::Point2f> pick_points(const cv::Mat& gray, const std::vector<cv::KeyPoint>* kps, int cell,
+                                     int max_points) {
+  std::vector<cv::Point2f> pts;
+  if (kps != nullptr && static_cast<int>(kps->size()) >= 20) {
+    const int gw = (gray.cols + cell - 1) / cell, gh = (gray.rows + cell - 1) / cell;
+    std::vector<int> best(static_cast<std::size_t>(gw * gh), -1);
+    for (int i = 0; i < static_cast<int>(kps->size()); ++i) {
+      const cv::Point2f& p = (*kps)[static_cast<std::size_t>(i)].pt;
+      const int gx = std::clamp(static_cast<int>(p.x) / cell, 0, gw - 1);
+      const int gy = std::clamp(static_cast<int>(p.y) / cell, 0, gh - 1);
+      int& b = best[static_cast<std::size_t>(gy * gw + gx)];
+      if (b < 0 ||
+          (*kps)[static_cast<std::size_t>(i)].response > (*kps)[static_cast<std::size_t>(b)].response)
+        b = i;
+    }
+    std::vector<int> chosen;
+    for (int b : best) {
+      if (b >= 0) chosen.push_back(b);
+    }
+    if (static_cast<int>(chosen.size()) > max_points) {
+      std::nth_element(chosen.begin(), chosen.begin() + max_points, chosen.end(), [&](int a, int b) {
+        return (*kps)[static_cast<std::size_t>(a)].response > (*kps)[static_cast<std::size_t>(b)].response;
+      });
+      chosen.resize(static_cast<std::size_t>(max_points));
+    }
+    for (int b : chosen) pts.push_back((*kps)[static_cast<std::size_t>(b)].pt);
+  } else {
+    cv::goodFeaturesToTrack(gray, pts, max_points, 0.01, cell / 2.0);
+  }
+  return pts;
+}
+
+// Buckets of point indices for radius queries.
+class PointGrid {
+ public:
+  PointGrid(const std::vector<cv::Point2f>& pts, float cell) : pts_(pts), cell_(std::max(cell, 1.f)) {
+    for (int i = 0; i < static_cast<int>(pts.size()); ++i)
+      cells_[key(pts[static_cast<std::size_t>(i)])].push_back(i);
+  }
+  // Calls f(index, squared distance) for every point within r of p.
+  template <typename F>
+  void for_each_near(const cv::Point2f& p, float r, F&& f) const {
+    const int span = static_cast<int>(std::ceil(r / cell_));
+    const auto [cx, cy] = coords(p);
+    for (int dy = -span; dy <= span; ++dy) {
+      for (int dx = -span; dx <= span; ++dx) {
+        const auto it = cells_.find(pack(cx + dx, cy + dy));
+        if (it == cells_.end()) continue;
+        for (int i : it->second) {
+          const cv::Point2f d = pts_[static_cast<std::size_t>(i)] - p;
+          const float d2 = d.dot(d);
+          if (d2 <= r * r) f(i, d2);
+        }
+      }
+    }
+  }
+
+ private:
+  [[nodiscard]] std::pair<int, int> coords(const cv::Point2f& p) const {
+    return {static_cast<int>(std::floor(p.x / cell_)), static_cast<int>(std::floor(p.y / cell_))};
+  }
+  static long long pack(int x, int y) { return (static_cast<long long>(x) << 32) ^ static_cast<unsigned>(y); }
+  [[nodiscard]] long long key(const cv::Point2f& p) const {
+    const auto [x, y] = coords(p);
+    return pack(x, y);
+  }
+  const std::vector<cv::Point2f>& pts_;
+  float cell_;
+  std::unordered_map<long long, std::vector<int>> cells_;
+};
+
+}  // namespace
+
+DynamicFeatureFilter::DynamicFeatureFilter(const MotionCheckConfig& cfg,
+                                           const std::vector<std::string>& class_names)
+    : cfg_(cfg) {
+  always_dynamic_.assign(class_names.size(), false);
+  for (const auto& n : cfg_.always_dynamic_classes) {
+    const int id = class_index(class_names, n);
+    if (id < 0)
+      throw ConfigError("(motion check)", 0, "always_dynamic_classes", "unknown class name '" + n + "'");
+    always_dynamic_[static_cast<std::size_t>(id)] = true;
+  }
+}
+
+void DynamicFeatureFilter::reset() {
+  history_.clear();
+  memory_.clear();
+}
+
+std::vector<Detection> DynamicFeatureFilter::carry_boxes(const Detections& d, std::size_t to_frame) const {
+  std::vector<Detection> out = d.items;
+  for (const FlowStep& step : history_) {
+    if (step.frame_index <= d.frame_index || step.frame_index > to_frame) continue;
+    for (Detection& det : out) {
+      std::vector<float> dx, dy;
+      for (std::size_t i = 0; i < step.prev.size(); ++i) {
+        if (!inside(det.box, step.prev[i])) continue;
+        dx.push_back(step.cur[i].x - step.prev[i].x);
+        dy.push_back(step.cur[i].y - step.prev[i].y);
+      }
+      if (dx.size() < 3) continue;  // nothing to follow: leave the box where it is
+      det.box.x += median_of(dx);
+      det.box.y += median_of(dy);
+    }
+  }
+  return out;
+}
+
+DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
+  Stopwatch sw;
+  DynamicResult res;
+  res.residual_used = "none";
+  if (in.gray == nullptr || in.gray->empty() || in.gray->type() != CV_8UC1) {
+    throw Error("dynamic filter: the current image must be a non-empty CV_8UC1 Mat");
+  }
+  const cv::Mat& gray = *in.gray;
+  const bool has_depth = in.depth != nullptr && !in.depth->empty();
+  if (has_depth && (in.depth->type() != CV_32F || in.depth->size() != gray.size())) {
+    throw Error("dynamic filter: depth must be CV_32F metres of the image's size");
+  }
+  const std::size_t n_kp = in.keypoints != nullptr ? in.keypoints->size() : 0;
+  res.keypoint_dynamic.assign(n_kp, false);
+  if (cfg_.mode == CullMode::kOff) {
+    res.ms = sw.elapsed_ms();
+    return res;
+  }
+  const bool use_boxes = cfg_.mode != CullMode::kFlowOnly;
+  const bool has_prev = in.prev_gray != nullptr && !in.prev_gray->empty();
+  if (has_prev && (in.prev_gray->size() != gray.size() || in.prev_gray->type() != CV_8UC1)) {
+    throw Error("dynamic filter: previous image differs in size or type from the current one");
+  }
+  const bool do_flow = cfg_.mode != CullMode::kDetectorOnly && has_prev;
+
+  // 1. Sparse flow, tracked backwards (cur -> prev) and checked forwards.
+  std::vector<cv::Point2f>& cur = res.flow_points;
+  std::vector<cv::Point2f>& prev = res.flow_prev;
+  if (do_flow) {
+    std::vector<cv::Point2f> cand = pick_points(gray, in.keypoints, cfg_.grid_cell_px, cfg_.max_points);
+    if (!cand.empty()) {
+      const cv::Size win(cfg_.lk_window, cfg_.lk_window);
+      const cv::TermCriteria term(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 20, 0.03);
+      std::vector<cv::Mat> pyr_cur, pyr_prev;
+      cv::buildOpticalFlowPyramid(gray, pyr_cur, win, cfg_.lk_levels);
+      cv::buildOpticalFlowPyramid(*in.prev_gray, pyr_prev, win, cfg_.lk_levels);
+      std::vector<cv::Point2f> back, fwd;
+      std::vector<uchar> st1, st2;
+      std::vector<float> err;
+      cv::calcOpticalFlowPyrLK(pyr_cur, pyr_prev, cand, back, st1, err, win, cfg_.lk_levels, term);
+      fwd = cand;
+      cv::calcOpticalFlowPyrLK(pyr_prev, pyr_cur, back, fwd, st2, err, win, cfg_.lk_levels, term,
+                               cv::OPTFLOW_USE_INITIAL_FLOW);
+      const cv::Rect2f image(0.f, 0.f, static_cast<float>(gray.cols), static_cast<float>(gray.rows));
+      const auto fb2 = static_cast<float>(cfg_.fb_max_px * cfg_.fb_max_px);
+      for (std::size_t i = 0; i < cand.size(); ++i) {
+        const cv::Point2f d = fwd[i] - cand[i];
+        if (st1[i] && st2[i] && d.dot(d) <= fb2 && inside(image, back[i])) {
+          cur.push_back(cand[i]);
+          prev.push_back(back[i]);
+        }
+      }
+    }
+    history_.push_back({in.frame_index, prev, cur});
+    while (static_cast<int>(history_.size()) > cfg_.max_history_frames) history_.pop_front();
+  } else if (!has_prev) {
+    history_.clear();
+  }
+
+  // 2. Candidate boxes, carried from the detection's frame to this one.
+  if (use_boxes && in.detections != nullptr) res.boxes = carry_boxes(*in.detections, in.frame_index);
+  const auto margin = static_cast<float>(cfg_.box_margin_px);
+  const std::size_t n = cur.size();
+  std::vector<bool> in_box(n, false);
+  for (std::size_t i = 0; i < n; ++i) {
+    for (const auto& b : res.boxes) in_box[i] = in_box[i] || inside(grow(b.box, margin), cur[i]);
+  }
+
+  // 3. Residual of each point after removing the camera's own motion.
+  res.flow_residual.assign(n, -1.f);
+  std::vector<bool> moving(n, false);
+  if (n >= 8) {
+    std::vector<int> fit;  // static candidates: outside the boxes
+    for (std::size_t i = 0; i < n; ++i) {
+      if (!in_box[i]) fit.push_back(static_cast<int>(i));
+    }
+    if (static_cast<int>(fit.size()) < cfg_.min_static_points) {
+      fit.resize(n);
+      for (std::size_t i = 0; i < n; ++i) fit[i] = static_cast<int>(i);
+    }
+    const bool want_reproj = cfg_.residual != "epipolar" && has_depth && in.K.has_value();
+    if (cfg_.residual == "reprojection" && !want_reproj) {
+      throw Error("dynamic filter: residual 'reprojection' needs depth and K");
+    }
+    std::vector<float> eps(n, 0.f);
+    bool done = false;
+    if (want_reproj) done = reprojection_residuals(in, fit, res, eps);
+    if (!done) epipolar_residuals(fit, res, eps);
+    for (std::size_t i = 0; i < n; ++i) moving[i] = res.flow_residual[i] > eps[i];
+  }
+  res.flow_point_moving = moving;
+
+  // 4. Which boxes move.
+  res.box_dynamic.assign(res.boxes.size(), false);
+  std::vector<float> object_depth(res.boxes.size(), 0.f);
+  for (std::size_t b = 0; b < res.boxes.size(); ++b) {
+    const Detection& det = res.boxes[b];
+    const bool always = det.class_id >= 0 &&
+                        static_cast<std::size_t>(det.class_id) < always_dynamic_.size() &&
+                        always_dynamic_[static_cast<std::size_t>(det.class_id)];
+    int total = 0, mov = 0;
+    std::vector<float> z_moving, z_all;
+    for (std::size_t i = 0; i < n; ++i) {
+      if (!inside(det.box, cur[i]) || res.flow_residual[i] < 0.f) continue;
+      ++total;
+      mov += moving[i] ? 1 : 0;
+      const float z = raw_depth(in.depth, cur[i]);
+      if (z > 0.f) (moving[i] ? z_moving : z_all).push_back(z);
+    }
+    bool dyn = false;
+    bool decided_by_motion = false;
+    if (cfg_.mode == CullMode::kDetectorOnly || !do_flow) {
+      dyn = cfg_.mode == CullMode::kDetectorOnly || always;
+    } else if (total >= cfg_.min_points_to_decide) {
+      dyn = static_cast<double>(mov) >= cfg_.moving_ratio_threshold * static_cast<double>(total);
+      decided_by_motion = dyn;
+    } else {
+      dyn = always;
+      decided_by_motion = always;
+    }
+    // People pause mid-walk: a box that moved a moment ago keeps being dynamic for a while.
+    Memory* match = nullptr;
+    for (Memory& m : memory_) {
+      if (m.class_id == det.class_id && iou(m.box, det.box) > 0.3f &&
+          (!match || iou(m.box, det.box) > iou(match->box, det.box))) {
+        match = &m;
+      }
+    }
+    if (!dyn && match &&
+        in.frame_index - match->last_dynamic_frame <= static_cast<std::size_t>(cfg_.dynamic_hold_frames)) {
+      dyn = true;
+    }
+    if (decided_by_motion) {
+      if (match) {
+        match->last_dynamic_frame = in.frame_index;
+      } else {
+        memory_.push_back({det.box, det.class_id, in.frame_index});
+        match = &memory_.back();
+      }
+    }
+    if (match) match->box = det.box;
+    res.box_dynamic[b] = dyn;
+    // Object depth: the movers' median, else a low quantile (the object is in front of its background).
+    if (z_moving.size() >= 3) {
+      object_depth[b] = median_of(z_moving);
+    } else {
+      z_all.insert(z_all.end(), z_moving.begin(), z_moving.end());
+      object_depth[b] = z_all.size() >= 3 ? quantile_of(z_all, 0.3) : 0.f;
+    }
+  }
+  std::erase_if(memory_, [&](const Memory& m) {
+    return in.frame_index > m.last_dynamic_frame + static_cast<std::size_t>(cfg_.dynamic_hold_frames);
+  });
+
+  // 5. Confirmed movers: moving points with enough moving neighbours (isolated ones are noise).
+  const bool cull_movers = do_flow && (cfg_.mode == CullMode::kFlowOnly || cfg_.cull_unboxed_movers);
+  std::vector<bool> confirmed(n, false);
+  const PointGrid grid(cur, static_cast<float>(std::max(cfg_.cluster_radius_px, cfg_.unboxed_radius_px)));
+  if (cull_movers) {
+    for (std::size_t i = 0; i < n; ++i) {
+      if (!moving[i]) continue;
+      int near = 0;
+      grid.for_each_near(cur[i], static_cast<float>(cfg_.cluster_radius_px),
+                         [&](int j, float) { near += moving[static_cast<std::size_t>(j)] ? 1 : 0; });
+      confirmed[i] = near >= cfg_.cluster_min_points;
+    }
+  }
+
+  // 6. Keypoints: inside a dynamic box (unless clearly behind the object), or nearest to a mover.
+  const auto bg_margin = static_cast<float>(cfg_.background_depth_margin_m);
+  for (std::size_t k = 0; k < n_kp; ++k) {
+    const cv::Point2f& p = (*in.keypoints)[k].pt;
+    bool dyn = false;
+    for (std::size_t b = 0; b < res.boxes.size() && !dyn; ++b) {
+      if (!res.box_dynamic[b] || !inside(grow(res.boxes[b].box, margin), p)) continue;
+      dyn = true;
+      if (cfg_.keep_background_in_box && object_depth[b] > 0.f) {
+        const float z = raw_depth(in.depth, p);
+        if (z > object_depth[b] + bg_margin) dyn = false;
+      }
+    }
+    if (!dyn && cull_movers) {
+      int nearest = -1;
+      float best = std::numeric_limits<float>::max();
+      grid.for_each_near(p, static_cast<float>(cfg_.unboxed_radius_px), [&](int j, float d2) {
+        if (d2 < best) best = d2, nearest = j;
+      });
+      dyn = nearest >= 0 && confirmed[static_cast<std::size_t>(nearest)];
+    }
+    res.keypoint_dynamic[k] = dyn;
+    res.culled += dyn ? 1 : 0;
+  }
+  res.ms = sw.elapsed_ms();
+  return res;
+}
+
+}  // namespace sp::dyn
