@@ -1,0 +1,65 @@
+#pragma once
+// Bundle adjustment of keyframe poses (T_cw) and map points with Ceres (ORB-SLAM's LocalBundleAdjustment;
+// also usable as global BA with the first keyframe fixed). Two passes: Huber-robust first pass,
+// chi-square outlier rejection (and points behind the camera), then a second pass without them.
+// Point blocks are eliminated first (Schur complement). Deterministic with threads = 1.
+#include <Eigen/Core>
+#include <atomic>
+#include <cstdint>
+#include <vector>
+
+#include "stillpoint/common/config_reader.hpp"
+#include "stillpoint/geometry/lie.hpp"
+#include "stillpoint/optimize/residuals.hpp"
+
+namespace sp::opt {
+
+struct BAKeyframe {
+  std::uint64_t id = 0;
+  geo::SE3 T_cw;
+  bool fixed = false;  // held constant (e.g. keyframes that see local points but are outside the window)
+};
+
+struct BAPoint {
+  std::uint64_t id = 0;
+  Eigen::Vector3d p_w = Eigen::Vector3d::Zero();
+};
+
+struct BAObservation {
+  std::uint64_t keyframe_id = 0, point_id = 0;
+  Eigen::Vector2d uv = Eigen::Vector2d::Zero();  // undistorted keypoint, pixels
+  double u_right = -1;                           // virtual right u, pixels; < 0 => monocular
+  double inv_sigma2 = 1;                         // 1 / sigma^2 of the keypoint's pyramid level
+};
+
+struct BAProblem {
+  std::vector<BAKeyframe> keyframes;
+  std::vector<BAPoint> points;
+  std::vector<BAObservation> observations;
+};
+
+struct BAConfig {
+  int iterations_first = 5;    // LM iterations of the robust first pass, [1, 1000]
+  int iterations_second = 10;  // LM iterations after outlier removal, [0, 1000] (0 = single pass)
+  double chi2_mono = 5.991;    // chi-square threshold, 2 dof, [0.1, 1000]
+  double chi2_stereo = 7.815;  // chi-square threshold, 3 dof, [0.1, 1000]
+  int threads = 1;             // Ceres threads, [1, 64]; 1 is deterministic
+  static BAConfig from_yaml(const ConfigReader& r);
+};
+
+struct BAResult {
+  std::vector<bool> outlier;  // per observation: chi2 above threshold or behind the camera at the end
+  bool aborted = false;       // the abort flag stopped the solve (state is the last accepted iterate)
+  double initial_cost = 0;    // Ceres cost (1/2 sum of robustified chi2) before the first pass
+  double final_cost = 0;      // Ceres cost after the last pass run (over that pass' observations)
+  int iterations = 0;         // LM iterations over both passes
+};
+
+// Updates problem.keyframes[].T_cw (non-fixed) and problem.points[].p_w in place. Throws sp::Error
+// for duplicate ids or an observation naming an unknown keyframe/point. Keyframes and points with no
+// observation are left untouched. The caller fixes the gauge (at least one fixed keyframe for
+// global BA). `abort` may be set from another thread; it is polled after every LM iteration.
+BAResult run_bundle_adjustment(BAProblem& problem, const CameraModel& camera, const BAConfig& config,
+                               const std::atomic<bool>* abort = nullptr);
+
+}  // namespace sp::opt
