@@ -1,5 +1,6 @@
 #include "stillpoint/eval/evaluate.hpp"
 
+#include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
 #include <Eigen/Geometry>
@@ -62,9 +63,10 @@ void evaluate_ate(const std::vector<io::StampedPose>& gt, const std::vector<io::
   const auto matches = io::associate(gt_stamps, est_stamps, o.offset, o.max_difference);
   const std::size_t need = o.align == Alignment::None ? 1 : 3;
   if (matches.size() < need) {
-    throw Error("evaluate: the trajectories do not overlap in time (" + std::to_string(matches.size()) +
-                " associated poses within " + std::to_string(o.max_difference) + " s, need " +
-                std::to_string(need) + ")");
+    throw Error(
+        fmt::format("evaluate: the trajectories do not overlap in time ({} associated poses within "
+                    "{:g} s, need {})",
+                    matches.size(), o.max_difference, need));
   }
   std::vector<Eigen::Vector3d> src, dst;
   for (const auto& [i, j] : matches) {

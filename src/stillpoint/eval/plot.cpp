@@ -159,7 +159,9 @@ void write_plot(const std::filesystem::path& png, const EvalResult& r) {
   text(img, fmt::format("Top view   ATE rmse {:.4f} m over {} poses", r.ate.rmse, r.pairs), {left, 38}, 0.65,
        kBlack, 1);
   draw_axes(img, X, Y, fmt::format("{} [m]", names[ax]), fmt::format("{} [m]", names[ay]));
-  for (std::size_t k = 0; k < r.gt_positions.size(); ++k) {
+  // At most ~300 error segments, so long runs stay readable.
+  const std::size_t every = std::max<std::size_t>(1, (r.gt_positions.size() + 299) / 300);
+  for (std::size_t k = 0; k < r.gt_positions.size(); k += every) {
     cv::line(img, pt(X, Y, r.gt_positions[k][ax], r.gt_positions[k][ay]),
              pt(X, Y, r.est_positions[k][ax], r.est_positions[k][ay]), kErr, 1, cv::LINE_AA);
   }
