@@ -9,6 +9,9 @@
 #include <opencv2/features2d.hpp>
 #include <opencv2/imgproc.hpp>
 #include <string>
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
 
 #include "stillpoint/common/error.hpp"
 #include "stillpoint/features/quadtree.hpp"
@@ -79,16 +82,29 @@ float ic_angle(const std::uint8_t* c, int step, const std::vector<int>& umax) {
   return cv::fastAtan2(static_cast<float>(m01), static_cast<float>(m10));
 }
 
-// Steered BRIEF: pattern rotated by the keypoint angle, pixel offsets rounded as in ORB.
-void steered_brief(const std::uint8_t* c, int step, float angle_deg, const OrbPattern& pat,
+// Steered BRIEF: pattern rotated by the keypoint angle, pixel offsets rounded to nearest (ties to
+// even, as cvRound). px/py: the pattern as floats, 2 * kPairs entries each.
+void steered_brief(const std::uint8_t* c, int step, float angle_deg, const float* px, const float* py,
                    std::uint8_t* desc) {
+  constexpr int kPoints = 2 * OrbPattern::kPairs;
   const float a = angle_deg * static_cast<float>(CV_PI / 180.0);
   const float ca = std::cos(a), sa = std::sin(a);
-  int off[2 * OrbPattern::kPairs];
-  for (int i = 0; i < 2 * OrbPattern::kPairs; ++i) {
-    const float x = pat.x[static_cast<std::size_t>(i)], y = pat.y[static_cast<std::size_t>(i)];
-    off[i] = cvRound(x * sa + y * ca) * step + cvRound(x * ca - y * sa);
+  alignas(16) int off[kPoints];
+#if defined(__SSE2__)
+  // Four points at a time; _mm_cvtps_epi32 rounds like cvRound and the sums stay exact in float.
+  const __m128 vca = _mm_set1_ps(ca), vsa = _mm_set1_ps(sa), vstep = _mm_set1_ps(static_cast<float>(step));
+  for (int i = 0; i < kPoints; i += 4) {
+    const __m128 x = _mm_loadu_ps(px + i), y = _mm_loadu_ps(py + i);
+    const __m128 rx = _mm_cvtepi32_ps(_mm_cvtps_epi32(_mm_sub_ps(_mm_mul_ps(x, vca), _mm_mul_ps(y, vsa))));
+    const __m128 ry = _mm_cvtepi32_ps(_mm_cvtps_epi32(_mm_add_ps(_mm_mul_ps(x, vsa), _mm_mul_ps(y, vca))));
+    _mm_store_si128(reinterpret_cast<__m128i*>(off + i),
+                    _mm_cvtps_epi32(_mm_add_ps(_mm_mul_ps(ry, vstep), rx)));
   }
+#else
+  for (int i = 0; i < kPoints; ++i) {
+    off[i] = cvRound(px[i] * sa + py[i] * ca) * step + cvRound(px[i] * ca - py[i] * sa);
+  }
+#endif
   for (int byte = 0; byte < OrbPattern::kPairs / 8; ++byte) {
     const int* o = off + byte * 16;
     int v = 0;
@@ -138,6 +154,10 @@ OrbExtractor::OrbExtractor(const OrbConfig& config) : config_(config), pattern_(
   level_kps_.resize(L);
   level_desc_.resize(L);
   scratch_.resize(L);
+  for (std::size_t i = 0; i < pattern_x_.size(); ++i) {
+    pattern_x_[i] = pattern_.x[i];
+    pattern_y_[i] = pattern_.y[i];
+  }
 }
 
 cv::Mat OrbExtractor::level_image(int level) const {
@@ -248,7 +268,8 @@ void OrbExtractor::process_level(int level, const cv::Mat& mask) {
   for (std::size_t i = 0; i < result.size(); ++i) {
     cv::KeyPoint& k = result[i];
     const std::uint8_t* c = borigin + cvRound(k.pt.y) * bstep + cvRound(k.pt.x);
-    steered_brief(c, bstep, k.angle, pattern_, level_desc_[l].ptr<std::uint8_t>(static_cast<int>(i)));
+    steered_brief(c, bstep, k.angle, pattern_x_.data(), pattern_y_.data(),
+                  level_desc_[l].ptr<std::uint8_t>(static_cast<int>(i)));
     k.octave = level;
     k.size = static_cast<float>(kPatchSize * scale_[l]);
     k.pt *= scale;

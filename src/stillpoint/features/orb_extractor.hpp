@@ -2,6 +2,7 @@
 // ORB feature extraction in the style of ORB-SLAM: scale pyramid, FAST on a cell grid with a
 // fallback threshold, quadtree distribution for spatially uniform keypoints, intensity-centroid
 // orientation and steered 256-bit BRIEF descriptors on a blurred level image.
+#include <array>
 #include <opencv2/core.hpp>
 #include <vector>
 
@@ -62,6 +63,7 @@ class OrbExtractor {
   std::vector<int> per_level_;
   std::vector<int> umax_;  // half-width of each row of the circular orientation patch
   OrbPattern pattern_;
+  std::array<float, 2 * OrbPattern::kPairs> pattern_x_{}, pattern_y_{};  // the pattern as floats
 
   // Per-level buffers kept between calls (padded level image, blurred copy, results).
   std::vector<cv::Mat> padded_;
