@@ -122,8 +122,8 @@ TEST(PlaceRetrieval, BowPrefersTheSameSceneAndRoundTrips) {
   };
   const cv::Mat a = scene(1), b = scene(2);
   cv::Mat a2;
-  cv::warpAffine(a, a2, (cv::Mat_<double>(2, 3) << 1, 0, 6, 0, 1, 4), a.size(), cv::INTER_LINEAR,
-                 cv::BORDER_REPLICATE);
+  const cv::Mat shift = (cv::Mat_<double>(2, 3) << 1, 0, 6, 0, 1, 4);
+  cv::warpAffine(a, a2, shift, a.size(), cv::INTER_LINEAR, cv::BORDER_REPLICATE);
   const auto da = orb_descriptors(a), db = orb_descriptors(b), da2 = orb_descriptors(a2);
   ASSERT_GT(da.rows, 50);
   const auto voc = BowVocabulary::train({da, db, orb_descriptors(scene(3))}, 64, 5, 1);
