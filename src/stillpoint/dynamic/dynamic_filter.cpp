@@ -186,7 +186,11 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
   std::vector<cv::Point2f>& cur = res.flow_points;
   std::vector<cv::Point2f>& prev = res.flow_prev;
   if (do_flow) {
-    std::vector<cv::Point2f> cand = pick_points(gray, in.keypoints, cfg_.grid_cell_px, cfg_.max_points);
+    // Cells no smaller than needed to spread max_points over the image.
+    const int cell =
+        std::max(cfg_.grid_cell_px,
+                 static_cast<int>(std::ceil(std::sqrt(static_cast<double>(gray.total()) / cfg_.max_points))));
+    std::vector<cv::Point2f> cand = pick_points(gray, in.keypoints, cell, cfg_.max_points);
     if (!cand.empty()) {
       const cv::Size win(cfg_.lk_window, cfg_.lk_window);
       const cv::TermCriteria term(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 20, 0.03);

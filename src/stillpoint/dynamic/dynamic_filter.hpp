@@ -47,11 +47,12 @@ struct MotionCheckConfig {
   bool keep_background_in_box = true;      // keypoints much deeper than the object in its box are kept
   double background_depth_margin_m = 0.5;  // "much deeper": > object depth + margin, metres [0.05, 10]
   bool cull_unboxed_movers = true;         // moving point clusters outside boxes are culled too
-  double unboxed_radius_px = 12.0;         // keypoints this close to a confirmed mover are culled [1, 200]
-  double cluster_radius_px = 40.0;         // a mover is confirmed with >= cluster_min_points movers this near
-  int cluster_min_points = 3;              // [1, 100] (counting itself)
-  double box_margin_px = 4.0;              // boxes are grown by this for keypoint tests [0, 100]
-  int max_history_frames = 10;             // flow history for carrying late detections forward [1, 100]
+  // A keypoint whose nearest tracked point (within this radius) is a confirmed mover is culled.
+  double unboxed_radius_px = 30.0;  // px [1, 200]
+  double cluster_radius_px = 60.0;  // a mover is confirmed with >= cluster_min_points movers this near
+  int cluster_min_points = 3;       // [1, 100] (counting itself)
+  double box_margin_px = 4.0;       // boxes are grown by this for keypoint tests [0, 100]
+  int max_history_frames = 10;      // flow history for carrying late detections forward [1, 100]
 
   static MotionCheckConfig from_yaml(const ConfigReader& r);
 };

@@ -149,7 +149,15 @@ void DynamicFeatureFilter::epipolar_residuals(const std::vector<int>& fit, Dynam
   const cv::Mat F = cv::findFundamentalMat(p, c, cv::FM_RANSAC, thr, cfg_.ransac_confidence, mask_f);
   const int h_in = H.empty() ? 0 : cv::countNonZero(mask_h);
   const int f_in = F.rows == 3 && F.cols == 3 ? cv::countNonZero(mask_f) : 0;
-  const bool use_h = h_in > 0 && (f_in == 0 || h_in >= 0.85 * f_in);
+  // Parallax evidence: points the fundamental matrix explains but the homography does not. Without
+  // it the epipolar geometry is degenerate (static / rotating camera, planar scene) and RANSAC would
+  // pick an F that also explains a moving object, so the homography residual is used instead.
+  int parallax = 0;
+  if (h_in > 0 && f_in > 0) {
+    for (int i = 0; i < mask_f.rows * mask_f.cols; ++i) parallax += mask_f.data[i] && !mask_h.data[i] ? 1 : 0;
+  }
+  const int min_parallax = std::max(8, static_cast<int>(0.05 * static_cast<double>(p.size())));
+  const bool use_h = h_in > 0 && (f_in == 0 || parallax < min_parallax);
   if (!use_h && f_in == 0) return;
   const cv::Matx33d M(use_h ? H : F(cv::Rect(0, 0, 3, 3)));
   for (std::size_t i = 0; i < cur.size(); ++i) {

@@ -1,0 +1,305 @@
+// The motion check on rendered planes with known camera and object motion.
+#include <gtest/gtest.h>
+
+#include "stillpoint/common/error.hpp"
+#include "stillpoint/dynamic/decoders.hpp"
+#include "stillpoint/dynamic/dynamic_filter.hpp"
+#include "synthetic_scene.hpp"
+
+namespace sp::dyn {
+namespace {
+
+using test::Plane;
+using test::Rendered;
+
+struct Scene {
+  cv::Mat wall_tex = test::make_texture(1), board_tex = test::make_texture(2),
+          patch_tex = test::make_texture(3);
+  bool with_board = true;
+  std::vector<Plane> planes(const cv::Point2d& patch_offset) const {
+    std::vector<Plane> p = {
+        {3.0, cv::Rect2d(), 200, &wall_tex, 0},
+        {2.0, cv::Rect2d(0.1 + patch_offset.x, -0.2 + patch_offset.y, 0.4, 0.4), 300, &patch_tex, 2}};
+    if (with_board) p.push_back({1.5, cv::Rect2d(-0.7, -0.3, 0.6, 0.6), 400, &board_tex, 1});
+    return p;
+  }
+};
+
+Eigen::Isometry3d pose(double yaw_deg, const Eigen::Vector3d& c) {
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  T.linear() = Eigen::AngleAxisd(yaw_deg * M_PI / 180, Eigen::Vector3d::UnitY()).toRotationMatrix();
+  T.translation() = c;
+  return T;
+}
+
+struct Shares {
+  double moving[3] = {0, 0, 0};
+  int count[3] = {0, 0, 0};
+  double raw_flow_background = 0;  // median |flow| of wall points, px
+};
+
+Shares shares(const DynamicResult& r, const cv::Mat& label) {
+  Shares s;
+  std::vector<double> flow;
+  for (std::size_t i = 0; i < r.flow_points.size(); ++i) {
+    const cv::Point p(cvRound(r.flow_points[i].x), cvRound(r.flow_points[i].y));
+    const int l = label.at<uchar>(p);
+    if (l > 2) continue;
+    s.count[l]++;
+    s.moving[l] += r.flow_point_moving[i] ? 1 : 0;
+    if (l == 0) flow.push_back(cv::norm(r.flow_points[i] - r.flow_prev[i]));
+  }
+  for (int l = 0; l < 3; ++l) s.moving[l] = s.count[l] ? s.moving[l] / s.count[l] : 0;
+  if (!flow.empty()) {
+    std::nth_element(flow.begin(), flow.begin() + static_cast<std::ptrdiff_t>(flow.size() / 2), flow.end());
+    s.raw_flow_background = flow[flow.size() / 2];
+  }
+  return s;
+}
+
+struct Pair {
+  Rendered prev, cur;
+  std::vector<cv::KeyPoint> kps = test::grid_keypoints(640, 480, 8);
+  Eigen::Isometry3d T_cur_prev;
+};
+
+// prev: camera at the origin; cur: camera panned by `yaw` and moved by `c`, the patch by `patch`.
+Pair make_pair(const Scene& s, double yaw, const Eigen::Vector3d& c, const cv::Point2d& patch) {
+  Pair p;
+  p.prev = test::render(s.planes({0, 0}), Eigen::Isometry3d::Identity());
+  const Eigen::Isometry3d T_w_cur = pose(yaw, c);
+  p.cur = test::render(s.planes(patch), T_w_cur);
+  p.T_cur_prev = T_w_cur.inverse();
+  return p;
+}
+
+DynamicInput input(const Pair& p, bool depth, const Detections* det = nullptr) {
+  DynamicInput in;
+  in.frame_index = 1;
+  in.prev_gray = &p.prev.gray;
+  in.gray = &p.cur.gray;
+  in.keypoints = &p.kps;
+  in.detections = det;
+  if (depth) {
+    in.depth = &p.cur.depth;
+    in.K = test::test_K();
+  }
+  return in;
+}
+
+TEST(MotionCheck, PanWithParallaxCompensatedByReprojection) {
+  const Scene s;
+  const Pair p = make_pair(s, 1.5, {0.04, 0, 0}, {0, 0.05});
+  MotionCheckConfig cfg;
+  cfg.mode = CullMode::kFlowOnly;
+  DynamicFeatureFilter f(cfg);
+  const DynamicResult r = f.process(input(p, true));
+  EXPECT_EQ(r.residual_used, "reprojection");
+  const Shares sh = shares(r, p.cur.label);
+  EXPECT_GT(sh.raw_flow_background, 5.0);  // the camera's own motion is large ...
+  EXPECT_GT(sh.count[0], 50);
+  EXPECT_GE(sh.count[2], 6);
+  EXPECT_LE(sh.moving[0], 0.03);  // ... yet the wall and the board stay static
+  EXPECT_LE(sh.moving[1], 0.03);
+  EXPECT_GE(sh.moving[2], 0.8);  // and the patch moves
+}
+
+TEST(MotionCheck, PanWithParallaxCompensatedByEpipolarDistance) {
+  const Scene s;
+  const Pair p = make_pair(s, 1.5, {0.04, 0, 0}, {0, 0.05});  // patch moves across the epipolar lines
+  MotionCheckConfig cfg;
+  cfg.mode = CullMode::kFlowOnly;
+  DynamicFeatureFilter f(cfg);
+  const DynamicResult r = f.process(input(p, false));
+  EXPECT_EQ(r.residual_used, "epipolar");
+  const Shares sh = shares(r, p.cur.label);
+  EXPECT_GT(sh.raw_flow_background, 5.0);
+  EXPECT_LE(sh.moving[0], 0.05);
+  EXPECT_LE(sh.moving[1], 0.05);
+  EXPECT_GE(sh.moving[2], 0.8);
+}
+
+TEST(MotionCheck, RotatingCameraUsesHomography) {
+  Scene s;
+  s.with_board = false;
+  const Pair p = make_pair(s, 2.0, {0, 0, 0}, {0.04, 0.0});
+  MotionCheckConfig cfg;
+  cfg.mode = CullMode::kFlowOnly;
+  DynamicFeatureFilter f(cfg);
+  const DynamicResult r = f.process(input(p, false));
+  EXPECT_EQ(r.residual_used, "homography");
+  const Shares sh = shares(r, p.cur.label);
+  EXPECT_GT(sh.raw_flow_background, 10.0);
+  EXPECT_LE(sh.moving[0], 0.03);
+  EXPECT_GE(sh.moving[2], 0.8);
+}
+
+struct KpShares {
+  double dyn_patch = 0, dyn_outside = 0, dyn_wall_in_box = 0;
+};
+
+KpShares keypoint_shares(const Pair& p, const DynamicResult& r, const std::vector<cv::Rect2f>& boxes) {
+  int np = 0, dp = 0, no = 0, dout = 0, nw = 0, dw = 0;
+  for (std::size_t k = 0; k < p.kps.size(); ++k) {
+    const cv::Point2f& pt = p.kps[k].pt;
+    const int l = p.cur.label.at<uchar>(cvRound(pt.y), cvRound(pt.x));
+    bool in_box = false;
+    for (const auto& b : boxes) in_box = in_box || b.contains(pt);
+    const bool d = r.keypoint_dynamic[k];
+    if (l == 2) {
+      ++np, dp += d;
+    } else if (!in_box) {
+      ++no, dout += d;
+    } else if (l == 0) {
+      ++nw, dw += d;
+    }
+  }
+  return {np ? double(dp) / np : 0, no ? double(dout) / no : 0, nw ? double(dw) / nw : 0};
+}
+
+TEST(MotionCheck, MovingBoxCulledStaticBoxKeptBackgroundInBoxKept) {
+  const Scene s;
+  const Pair p = make_pair(s, 1.5, {0.04, 0, 0}, {0, 0.05});
+  // A loose person box round the patch (wall behind it shows) and a person box on the static board.
+  cv::Rect2f patch_box = test::label_box(p.cur.label, 2);
+  patch_box = cv::Rect2f(patch_box.x - 30, patch_box.y - 30, patch_box.width + 60, patch_box.height + 60);
+  const cv::Rect2f board_box = test::label_box(p.cur.label, 1);
+  Detections det;
+  det.frame_index = 1;
+  det.items = {{patch_box, 0, 0.9f}, {board_box, 0, 0.8f}};
+  DynamicFeatureFilter f{MotionCheckConfig{}};
+  const DynamicResult r = f.process(input(p, true, &det));
+  ASSERT_EQ(r.box_dynamic.size(), 2u);
+  EXPECT_TRUE(r.box_dynamic[0]);
+  EXPECT_FALSE(r.box_dynamic[1]);
+  const KpShares k = keypoint_shares(p, r, {patch_box, board_box});
+  EXPECT_GE(k.dyn_patch, 0.97);
+  EXPECT_LE(k.dyn_outside, 0.02);
+  EXPECT_LE(k.dyn_wall_in_box, 0.1);  // the wall 1 m behind the patch is depth-separated and kept
+  EXPECT_EQ(r.culled,
+            static_cast<int>(std::count(r.keypoint_dynamic.begin(), r.keypoint_dynamic.end(), true)));
+}
+
+TEST(MotionCheck, AblationModes) {
+  const Scene s;
+  const Pair p = make_pair(s, 1.5, {0.04, 0, 0}, {0, 0.05});
+  const cv::Rect2f patch_box = test::label_box(p.cur.label, 2), board_box = test::label_box(p.cur.label, 1);
+  Detections det;
+  det.frame_index = 1;
+  det.items = {{patch_box, 0, 0.9f}, {board_box, 0, 0.8f}};
+  MotionCheckConfig cfg;
+  cfg.mode = CullMode::kDetectorOnly;
+  const DynamicResult d = DynamicFeatureFilter(cfg).process(input(p, true, &det));
+  EXPECT_TRUE(d.flow_points.empty());  // no motion check at all
+  EXPECT_TRUE(d.box_dynamic[0] && d.box_dynamic[1]);
+  cfg.mode = CullMode::kFlowOnly;
+  const DynamicResult fo = DynamicFeatureFilter(cfg).process(input(p, true, &det));
+  EXPECT_TRUE(fo.boxes.empty());
+  const KpShares k = keypoint_shares(p, fo, {});
+  EXPECT_GE(k.dyn_patch, 0.7);
+  EXPECT_LE(k.dyn_outside, 0.03);
+  cfg.mode = CullMode::kOff;
+  EXPECT_EQ(DynamicFeatureFilter(cfg).process(input(p, true, &det)).culled, 0);
+}
+
+TEST(MotionCheck, LateDetectionIsCarriedToTheCurrentFrame) {
+  const Scene s;
+  std::vector<Rendered> frames;
+  for (int i = 0; i < 3; ++i)
+    frames.push_back(test::render(s.planes({0.06 * i, 0}), Eigen::Isometry3d::Identity()));
+  const auto kps = test::grid_keypoints(640, 480, 8);
+  Detections det;  // detected on frame 0, used on frames 1 and 2
+  det.frame_index = 0;
+  det.items = {{test::label_box(frames[0].label, 2), 0, 0.9f}};
+  DynamicFeatureFilter f{MotionCheckConfig{}};
+  DynamicResult r;
+  for (std::size_t i = 1; i < 3; ++i) {
+    DynamicInput in;
+    in.frame_index = i;
+    in.prev_gray = &frames[i - 1].gray;
+    in.gray = &frames[i].gray;
+    in.keypoints = &kps;
+    in.detections = &det;
+    r = f.process(in);
+  }
+  const cv::Rect2f truth = test::label_box(frames[2].label, 2);
+  ASSERT_EQ(r.boxes.size(), 1u);
+  EXPECT_LT(iou(det.items[0].box, truth), 0.6f);  // the stale box would be off
+  EXPECT_GT(iou(r.boxes[0].box, truth), 0.85f);
+  EXPECT_TRUE(r.box_dynamic[0]);
+  EXPECT_EQ(r.residual_used, "homography");  // static camera: identity motion
+}
+
+TEST(MotionCheck, PausingPersonIsHeldDynamicThenReleased) {
+  const Scene s;
+  const cv::Point2d at[] = {{0, 0}, {0.05, 0}, {0.05, 0}, {0.05, 0}};  // moves once, then stands
+  std::vector<Rendered> frames;
+  for (const auto& o : at) frames.push_back(test::render(s.planes(o), Eigen::Isometry3d::Identity()));
+  const auto kps = test::grid_keypoints(640, 480, 8);
+  for (int hold : {10, 1}) {
+    MotionCheckConfig cfg;
+    cfg.dynamic_hold_frames = hold;
+    DynamicFeatureFilter f(cfg);
+    std::vector<bool> dyn;
+    for (std::size_t i = 1; i < frames.size(); ++i) {
+      Detections det;
+      det.frame_index = i;
+      det.items = {{test::label_box(frames[i].label, 2), 0, 0.9f}};
+      DynamicInput in;
+      in.frame_index = i;
+      in.prev_gray = &frames[i - 1].gray;
+      in.gray = &frames[i].gray;
+      in.keypoints = &kps;
+      in.detections = &det;
+      dyn.push_back(f.process(in).box_dynamic.at(0));
+    }
+    EXPECT_TRUE(dyn[0]);
+    EXPECT_EQ(dyn[2], hold == 10) << "hold " << hold;  // frame 3: two frames after the last motion
+  }
+}
+
+TEST(MotionCheck, FirstFrameTrustsAlwaysDynamicClasses) {
+  const Scene s;
+  const Rendered f0 = test::render(s.planes({0, 0}), Eigen::Isometry3d::Identity());
+  const auto kps = test::grid_keypoints(640, 480, 8);
+  Detections det;
+  det.items = {{test::label_box(f0.label, 2), 0, 0.9f}, {test::label_box(f0.label, 1), 56 /* chair */, 0.9f}};
+  DynamicInput in;
+  in.gray = &f0.gray;
+  in.keypoints = &kps;
+  in.detections = &det;
+  const DynamicResult r = DynamicFeatureFilter{MotionCheckConfig{}}.process(in);
+  EXPECT_TRUE(r.box_dynamic[0]);
+  EXPECT_FALSE(r.box_dynamic[1]);
+  EXPECT_GT(r.culled, 100);
+  EXPECT_EQ(r.residual_used, "none");
+}
+
+TEST(MotionCheck, ConfigAndInputErrors) {
+  const auto r =
+      ConfigReader::from_string("mode: flow_only\nepsilon_epipolar_px: 1.5\nlk_window: 15\n", "m.yaml");
+  const MotionCheckConfig c = MotionCheckConfig::from_yaml(r);
+  r.finish();
+  EXPECT_EQ(c.mode, CullMode::kFlowOnly);
+  EXPECT_DOUBLE_EQ(c.epsilon_epipolar_px, 1.5);
+  EXPECT_EQ(c.lk_window, 15);
+  EXPECT_THROW(MotionCheckConfig::from_yaml(ConfigReader::from_string("mode: magic\n", "m.yaml")),
+               ConfigError);
+  EXPECT_THROW(
+      MotionCheckConfig::from_yaml(ConfigReader::from_string("moving_ratio_threshold: 2\n", "m.yaml")),
+      ConfigError);
+  MotionCheckConfig bad;
+  bad.always_dynamic_classes = {"unicorn"};
+  EXPECT_THROW(DynamicFeatureFilter{bad}, ConfigError);
+  DynamicFeatureFilter f{MotionCheckConfig{}};
+  const cv::Mat a(480, 640, CV_8U, cv::Scalar(0)), b(240, 320, CV_8U, cv::Scalar(0));
+  DynamicInput in;
+  in.prev_gray = &b;
+  in.gray = &a;
+  EXPECT_THROW(f.process(in), Error);
+  in.gray = nullptr;
+  EXPECT_THROW(f.process(in), Error);
+}
+
+}  // namespace
+}  // namespace sp::dyn
