@@ -51,9 +51,9 @@ TEST(Evaluate, AlignmentRecoversRandomSe3AndSim3) {
     EXPECT_LT((r.alignment.t - t).norm(), 1e-9);
     EXPECT_NEAR(r.alignment.scale, s, 1e-9);
     EXPECT_LT(r.ate.max, 1e-9);
-    if (align == Alignment::SE3) {
-      EXPECT_LT(r.rpe_trans.max, 1e-9);  // RPE is scale-sensitive by design
-    }
+    // RPE uses the fitted scale, so the scaled copy has no relative error either.
+    EXPECT_LT(r.rpe_trans.max, 1e-9);
+    EXPECT_LT(r.rpe_rot_deg.max, 1e-5);  // acos near 1 amplifies rounding
   }
 }
 
@@ -97,7 +97,7 @@ TEST(Evaluate, RpeOfAConstantTranslationDrift) {
     EXPECT_EQ(r.rpe_pairs, 69u);
     EXPECT_NEAR(r.rpe_trans.min, 0.01, 1e-9);
     EXPECT_NEAR(r.rpe_trans.max, 0.01, 1e-9);
-    EXPECT_NEAR(r.rpe_rot_deg.max, 0.0, 1e-6);
+    EXPECT_NEAR(r.rpe_rot_deg.max, 0.0, 1e-5);
   }
 }
 

@@ -106,7 +106,8 @@ void evaluate_rpe(const std::vector<io::StampedPose>& gt, const std::vector<io::
       continue;
     }
     // E = (P_i^-1 P_j) (Q_i^-1 Q_j)^-1, P estimate, Q ground truth.
-    const Eigen::Isometry3d d_est = to_isometry(est[i]).inverse() * to_isometry(est[j]);
+    Eigen::Isometry3d d_est = to_isometry(est[i]).inverse() * to_isometry(est[j]);
+    d_est.translation() *= r.alignment.scale;  // evaluate_rpe.py --scale: 1 unless aligned with Sim(3)
     const Eigen::Isometry3d d_gt = to_isometry(gt[g0]).inverse() * to_isometry(gt[g1]);
     const Eigen::Isometry3d E = d_est * d_gt.inverse();
     const double c = std::clamp((E.linear().trace() - 1.0) / 2.0, -1.0, 1.0);

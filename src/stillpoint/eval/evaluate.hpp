@@ -37,6 +37,8 @@ struct EvalResult {
   std::vector<double> rpe_stamps, rpe_trans_errors, rpe_rot_errors_deg;
 };
 
+// With Alignment::Sim3 the estimate's relative motions are scaled by the fitted scale for RPE too
+// (evaluate_rpe.py --scale); otherwise RPE compares them as they are.
 // Throws sp::Error when the trajectories do not overlap in time (no associated pair, or too few for
 // the alignment: 3 for SE3/Sim3). RPE statistics are empty (count 0) when no pair fits the delta.
 EvalResult evaluate(const std::vector<io::StampedPose>& gt, const std::vector<io::StampedPose>& est,
