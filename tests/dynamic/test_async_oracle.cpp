@@ -1,0 +1,148 @@
+// AsyncDetector lifecycle and the oracle boxes reader.
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <filesystem>
+#include <fstream>
+#include <thread>
+
+#include "stillpoint/common/error.hpp"
+#include "stillpoint/dynamic/async_detector.hpp"
+#include "stillpoint/dynamic/oracle_detections.hpp"
+
+namespace sp::dyn {
+namespace {
+
+using namespace std::chrono_literals;
+
+// A fake detector: one box whose x is the image's first pixel value, after a delay.
+struct SlowFake {
+  std::chrono::milliseconds delay;
+  std::shared_ptr<std::atomic<int>> calls = std::make_shared<std::atomic<int>>(0);
+  Detections operator()(const cv::Mat& img) const {
+    std::this_thread::sleep_for(delay);
+    ++*calls;
+    Detections d;
+    d.items.push_back({cv::Rect2f(img.at<uchar>(0, 0), 0, 10, 10), 0, 1.f});
+    return d;
+  }
+};
+
+cv::Mat frame(int v) { return cv::Mat(4, 4, CV_8U, cv::Scalar(v)); }
+
+TEST(AsyncDetector, SyncModeDetectsInTheCallersThread) {
+  SlowFake fake{0ms};
+  AsyncDetector a(fake, AsyncDetector::Mode::kSync);
+  EXPECT_FALSE(a.latest().has_value());
+  a.submit(7, 1.5, frame(42));
+  const auto d = a.latest();
+  ASSERT_TRUE(d.has_value());
+  EXPECT_EQ(d->frame_index, 7u);
+  EXPECT_DOUBLE_EQ(d->stamp, 1.5);
+  EXPECT_FLOAT_EQ(d->items.at(0).box.x, 42.f);
+  EXPECT_EQ(*fake.calls, 1);
+}
+
+TEST(AsyncDetector, WaitForGetsTheFrameAndKeepsOnlyTheNewestPending) {
+  SlowFake fake{30ms};
+  AsyncDetector a(fake, AsyncDetector::Mode::kAsync);
+  a.submit(0, 0.0, frame(0));
+  const auto d0 = a.wait_for(0, 5s);
+  ASSERT_TRUE(d0.has_value());
+  EXPECT_EQ(d0->frame_index, 0u);
+  // Burst while busy: only the newest pending frame survives.
+  for (int i = 1; i <= 6; ++i) a.submit(static_cast<std::size_t>(i), i, frame(i));
+  const auto d6 = a.wait_for(6, 5s);
+  ASSERT_TRUE(d6.has_value());
+  EXPECT_EQ(d6->frame_index, 6u);
+  EXPECT_FLOAT_EQ(d6->items.at(0).box.x, 6.f);  // the image was copied at submit
+  EXPECT_GE(a.dropped(), 4u);
+  EXPECT_LE(*fake.calls, 3);
+  a.stop();
+}
+
+TEST(AsyncDetector, WaitForReturnsTheLatestWhenTheBudgetRunsOut) {
+  SlowFake fake{300ms};
+  AsyncDetector a(fake, AsyncDetector::Mode::kAsync);
+  a.submit(0, 0.0, frame(1));
+  ASSERT_TRUE(a.wait_for(0, 10s).has_value());
+  a.submit(1, 1.0, frame(2));
+  const auto d = a.wait_for(1, 1ms);  // far below the detector's time
+  ASSERT_TRUE(d.has_value());
+  EXPECT_EQ(d->frame_index, 0u);
+}
+
+TEST(AsyncDetector, StopMidRunFinishesCleanlyAndIgnoresLaterFrames) {
+  SlowFake fake{100ms};
+  auto a = std::make_unique<AsyncDetector>(fake, AsyncDetector::Mode::kAsync);
+  a->submit(0, 0.0, frame(1));
+  a->submit(1, 0.0, frame(2));
+  std::this_thread::sleep_for(20ms);
+  a->stop();  // joins after the detection in progress
+  const int calls = *fake.calls;
+  EXPECT_LE(calls, 1);
+  a->submit(2, 0.0, frame(3));
+  a->stop();  // idempotent
+  EXPECT_EQ(*fake.calls, calls);
+  EXPECT_FALSE(a->wait_for(5, 1ms).has_value() && a->latest()->frame_index == 2u);
+  a.reset();  // destructor after stop
+}
+
+TEST(AsyncDetector, DetectorErrorIsRethrownToTheCaller) {
+  AsyncDetector a([](const cv::Mat&) -> Detections { throw Error("boom"); }, AsyncDetector::Mode::kAsync);
+  a.submit(0, 0.0, frame(1));
+  a.wait_for(0, 2s);
+  EXPECT_THROW(a.submit(1, 0.0, frame(1)), Error);
+}
+
+TEST(AsyncDetector, ModelLoadErrorThrowsInTheCallersThread) {
+  DetectorConfig cfg;
+  cfg.model = "/nonexistent/yolo.onnx";
+  EXPECT_THROW(AsyncDetector(cfg, AsyncDetector::Mode::kAsync), Error);
+}
+
+std::filesystem::path write_file(const std::string& name, const std::string& text) {
+  std::filesystem::create_directories(SP_TEST_TMP_DIR);
+  const auto p = std::filesystem::path(SP_TEST_TMP_DIR) / name;
+  std::ofstream(p) << text;
+  return p;
+}
+
+TEST(OracleDetections, NearestStampMovingBoxes) {
+  const auto p = write_file("boxes_ok.txt",
+                            "# header\n"
+                            "1.000 1 person 10 20 29 59 1\n"
+                            "1.000 2 person 100 100 109 109 0\n"
+                            "1.033 1 person 12 20 31 59 1\n");
+  const auto o = OracleDetections::load(p);
+  EXPECT_EQ(o.frame_count(), 2u);
+  const Detections d = o.at(1.005, 3);
+  EXPECT_EQ(d.frame_index, 3u);
+  ASSERT_EQ(d.items.size(), 1u);  // the standing person is left out
+  EXPECT_FLOAT_EQ(d.items[0].box.x, 10.f);
+  EXPECT_FLOAT_EQ(d.items[0].box.width, 20.f);  // inclusive bounds
+  EXPECT_EQ(d.items[0].class_id, 0);
+  EXPECT_EQ(o.at(1.0, 0, false).items.size(), 2u);
+  EXPECT_FLOAT_EQ(o.at(1.030).items.at(0).box.x, 12.f);
+  EXPECT_TRUE(o.at(2.0).items.empty());  // no frame near
+}
+
+TEST(OracleDetections, MalformedLinesNameFileAndLine) {
+  const char* bad[] = {"1.0 1 person 10 20 30\n", "1.0 1 person 10 20 30 40 2\n",
+                       "1.0 1 person 50 20 30 40 1\n", "1.0 1 person 10 20 30 40 1 extra\n"};
+  int k = 0;
+  for (const char* line : bad) {
+    const auto p = write_file("boxes_bad" + std::to_string(k++) + ".txt", std::string("# c\n") + line);
+    try {
+      OracleDetections::load(p);
+      FAIL() << "accepted: " << line;
+    } catch (const InputError& e) {
+      EXPECT_EQ(e.line(), 2);
+      EXPECT_NE(std::string(e.what()).find(p.string() + ":2"), std::string::npos);
+    }
+  }
+  EXPECT_THROW(OracleDetections::load("/nonexistent/boxes.txt"), Error);
+}
+
+}  // namespace
+}  // namespace sp::dyn
