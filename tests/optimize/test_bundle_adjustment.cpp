@@ -136,6 +136,19 @@ TEST(BundleAdjustment, AbortFlagStopsTheSolve) {
   EXPECT_GT(r2.iterations, 0);
 }
 
+TEST(BundleAdjustment, AllKeyframesFixedRefinesPointsOnly) {
+  Scene s = make_scene(3, 100, 0.0, 0.0, 6);
+  for (std::size_t k = 0; k < s.problem.keyframes.size(); ++k) {
+    s.problem.keyframes[k] = s.truth.keyframes[k];
+    s.problem.keyframes[k].fixed = true;
+  }
+  const BAResult r = run_bundle_adjustment(s.problem, test::test_camera(), BAConfig{});
+  EXPECT_LT(r.final_cost, 1e-6 * r.initial_cost);
+  for (std::size_t k = 0; k < s.problem.keyframes.size(); ++k) {
+    EXPECT_EQ(s.problem.keyframes[k].T_cw.matrix(), s.truth.keyframes[k].T_cw.matrix());
+  }
+}
+
 TEST(BundleAdjustment, RejectsUnknownIds) {
   Scene s = make_scene(2, 20, 0.0, 0.0, 5);
   s.problem.observations.back().point_id = 999999;

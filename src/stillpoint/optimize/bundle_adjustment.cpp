@@ -151,6 +151,13 @@ class BundleAdjuster {
     if (summary.termination_type == ceres::FAILURE) {
       spdlog::warn("bundle adjustment: Ceres failed: {}", summary.message);
     }
+    spdlog::debug(
+        "BA pass: {} residuals, {} free poses, {} iterations, ms: total {:.1f} preprocess {:.1f} linear "
+        "{:.1f} "
+        "jacobians {:.1f} residuals {:.1f}",
+        summary.num_residual_blocks, free_poses, iterations_of(summary), 1e3 * summary.total_time_in_seconds,
+        1e3 * summary.preprocessor_time_in_seconds, 1e3 * summary.linear_solver_time_in_seconds,
+        1e3 * summary.jacobian_evaluation_time_in_seconds, 1e3 * summary.residual_evaluation_time_in_seconds);
     return summary;
   }
 
