@@ -12,8 +12,9 @@
 namespace sp::opt {
 namespace {
 
-// Above this many free keyframes the reduced camera system is solved sparsely; below, dense Schur
-// is faster (measured: see the module report).
+// Above this many free keyframes the reduced camera system is factorised sparsely (SuiteSparse);
+// below, its dense Cholesky is as fast (measured equal within noise at 12 free poses / 2000 points)
+// and needs no symbolic analysis.
 constexpr int kDenseSchurMaxPoses = 40;
 
 struct Indexed {
