@@ -1,0 +1,55 @@
+#pragma once
+// Inverted file over BoW vectors: word -> ids of the entries that contain it. Map-agnostic: an id is
+// whatever the caller files (keyframe ids, or sequence ids for the keyframe-sequence detector).
+// Thread-safe: every method takes the database's own mutex.
+#include <cstdint>
+#include <functional>
+#include <mutex>
+#include <optional>
+#include <unordered_map>
+#include <vector>
+
+#include "stillpoint/loop/bow_vector.hpp"
+
+namespace sp::loop {
+
+using KeyframeId = std::uint64_t;
+
+struct DatabaseHit {
+  KeyframeId id = 0;
+  std::uint32_t common_words = 0;
+  double score = 0.0;  // L1 score against the query
+};
+
+class KeyframeDatabase {
+ public:
+  // Files `bow` under `id` (replacing an earlier vector of the same id). Keeps a copy of the vector.
+  void add(KeyframeId id, const BowVector& bow);
+  // Removes `id` from the inverted file; unknown ids are ignored.
+  void erase(KeyframeId id);
+  void clear();
+
+  [[nodiscard]] bool contains(KeyframeId id) const;
+  [[nodiscard]] std::size_t size() const;
+  // L1 score of a filed vector against `bow`; nullopt for an unknown id. Counted as a scored pair.
+  [[nodiscard]] std::optional<double> score(KeyframeId id, const BowVector& bow) const;
+  [[nodiscard]] std::optional<BowVector> bow(KeyframeId id) const;
+
+  // One database query: the entries sharing words with `query`, except those `exclude` rejects,
+  // that share at least min_common_ratio x (the largest number of shared words), each scored.
+  // Sorted by score, best first. Counts one query and one scored pair per returned hit.
+  [[nodiscard]] std::vector<DatabaseHit> query(const BowVector& query, double min_common_ratio,
+                                               const std::function<bool(KeyframeId)>& exclude = {}) const;
+
+  [[nodiscard]] std::size_t queries() const;
+  [[nodiscard]] std::size_t scored_pairs() const;
+
+ private:
+  mutable std::mutex mutex_;
+  std::vector<std::vector<KeyframeId>> inverted_;  // indexed by word
+  std::unordered_map<KeyframeId, BowVector> vectors_;
+  mutable std::size_t queries_ = 0;
+  mutable std::size_t scored_ = 0;
+};
+
+}  // namespace sp::loop

@@ -1,0 +1,76 @@
+#pragma once
+// Keyframe sequences (paper §III-B, Algorithm 1): consecutive keyframes whose viewing direction barely
+// changes are grouped into a sequence, and loops are searched sequence against sequence, so the
+// database is queried once per sequence instead of once per keyframe.
+//
+// Our reading (docs/loop_sequences.md has the reasoning):
+//  * θ between keyframes a and b: R = R_cw_b · R_cw_a^T, θ = arccos((tr R − 1) / 2) (Eqs. 6–9), taken
+//    between consecutive keyframes (option: against the sequence's first keyframe).
+//  * A keyframe joins the current sequence while θ < θ_T and the sequence holds fewer than L_T
+//    keyframes; otherwise the current sequence closes and the keyframe starts a new one. So a
+//    sequence has 1..L_T keyframes.
+//  * A sequence's BoW vector is the L1-normalised sum of its keyframes' L1-normalised vectors.
+//  * Sequences with fewer than min_length (2) keyframes are neither queried nor filed: they never
+//    close a loop.
+//  * The newly CLOSED sequence is the query (its vector is complete); detection therefore lags the
+//    newest keyframe by at most L_T keyframes.
+#include <Eigen/Core>
+#include <cstdint>
+#include <optional>
+#include <vector>
+
+#include "stillpoint/common/config_reader.hpp"
+#include "stillpoint/loop/bow_vector.hpp"
+#include "stillpoint/loop/keyframe_database.hpp"
+
+namespace sp::loop {
+
+using SequenceId = std::uint64_t;
+
+struct SequenceParams {
+  double theta_t = 0.1;         // θ_T: a larger rotation closes the sequence [rad], (0, π]
+  int max_length = 15;          // L_T: keyframes per sequence at most [count], 1..1000
+  int min_length = 2;           // shorter sequences never close a loop [count], 1..1000
+  bool angle_to_first = false;  // measure θ against the sequence's first keyframe, not the previous one
+  int min_consistency = 2;      // consecutive query sequences a candidate group must persist [count], 1..20
+  int exclude_recent = 1;       // the last N filed sequences are never candidates [count], 0..100
+
+  static SequenceParams from_yaml(const sp::ConfigReader& r);
+  void validate() const;  // throws sp::Error
+};
+
+// Rotation angle between two camera orientations (world-to-camera rotations), in [0, π] rad.
+double rotation_angle(const Eigen::Matrix3d& R_cw_a, const Eigen::Matrix3d& R_cw_b);
+
+struct KeyframeSequence {
+  SequenceId id = 0;                  // 0, 1, 2, ... in the order sequences start
+  std::vector<KeyframeId> keyframes;  // in insertion order
+  BowVector bow;                      // normalised sum of the keyframes' vectors
+};
+
+// Algorithm 1's segmentation, alone (no database): feed keyframes in order.
+class SequenceSegmenter {
+ public:
+  explicit SequenceSegmenter(const SequenceParams& params);
+
+  // Adds the next keyframe. Returns the sequence this keyframe closed, if it closed one; the
+  // keyframe itself then starts the next sequence.
+  std::optional<KeyframeSequence> add(KeyframeId id, const Eigen::Matrix3d& R_cw, const BowVector& bow);
+  // Closes the open sequence (end of the run); nullopt when it is empty.
+  std::optional<KeyframeSequence> flush();
+
+  [[nodiscard]] const std::vector<KeyframeId>& open_keyframes() const noexcept { return ids_; }
+  [[nodiscard]] SequenceId open_id() const noexcept { return next_id_; }
+
+ private:
+  KeyframeSequence close();
+
+  SequenceParams params_;
+  SequenceId next_id_ = 0;
+  std::vector<KeyframeId> ids_;
+  std::vector<BowVector> bows_;
+  Eigen::Matrix3d first_R_ = Eigen::Matrix3d::Identity();
+  Eigen::Matrix3d last_R_ = Eigen::Matrix3d::Identity();
+};
+
+}  // namespace sp::loop

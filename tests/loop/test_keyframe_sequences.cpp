@@ -1,0 +1,102 @@
+#include <gtest/gtest.h>
+
+#include <Eigen/Geometry>
+
+#include "stillpoint/common/error.hpp"
+#include "stillpoint/loop/keyframe_sequences.hpp"
+
+namespace sp::loop {
+namespace {
+
+Eigen::Matrix3d yaw(double a) {
+  return Eigen::AngleAxisd(a, Eigen::Vector3d(0.3, 1.0, 0.2).normalized()).toRotationMatrix();
+}
+
+BowVector one_word(WordId w) { return BowVector::from_entries({{w, 1.0}}); }
+
+// Feeds keyframes whose consecutive rotation steps are `steps` (rad); returns closed sequence sizes.
+std::vector<std::size_t> segment(const std::vector<double>& steps, const SequenceParams& p,
+                                 bool flush = true) {
+  SequenceSegmenter seg(p);
+  std::vector<std::size_t> sizes;
+  double a = 0.2;
+  KeyframeId id = 0;
+  auto feed = [&](double angle) {
+    if (auto s = seg.add(id, yaw(angle), one_word(static_cast<WordId>(id))))
+      sizes.push_back(s->keyframes.size());
+    ++id;
+  };
+  feed(a);
+  for (double st : steps) feed(a += st);
+  if (flush) {
+    if (auto s = seg.flush()) sizes.push_back(s->keyframes.size());
+  }
+  return sizes;
+}
+
+TEST(RotationAngle, MatchesAxisAngle) {
+  const Eigen::Matrix3d R1 = yaw(0.7);
+  const Eigen::Matrix3d R2 = Eigen::AngleAxisd(0.25, Eigen::Vector3d::UnitX()).toRotationMatrix() * R1;
+  EXPECT_NEAR(rotation_angle(R1, R2), 0.25, 1e-9);
+  EXPECT_NEAR(rotation_angle(R2, R1), 0.25, 1e-9);
+  EXPECT_NEAR(rotation_angle(R1, R1), 0.0, 1e-6);
+  EXPECT_NEAR(rotation_angle(Eigen::Matrix3d::Identity(), yaw(M_PI)), M_PI, 1e-6);
+}
+
+TEST(SequenceSegmenter, AnglesJustBelowAndAboveThreshold) {
+  SequenceParams p;  // θ_T = 0.1, L_T = 15
+  // 0.0999 joins, 0.1001 closes: {0,1,2} {3,4} {5}
+  EXPECT_EQ(segment({0.0999, 0.0999, 0.1001, 0.0999, 0.1001}, p), (std::vector<std::size_t>{3, 2, 1}));
+  // Slow drift never closes on the angle when measured between consecutive keyframes...
+  EXPECT_EQ(segment(std::vector<double>(9, 0.05), p), (std::vector<std::size_t>{10}));
+  // ...but does when measured against the first keyframe of the sequence.
+  p.angle_to_first = true;
+  EXPECT_EQ(segment(std::vector<double>(9, 0.05), p), (std::vector<std::size_t>{2, 2, 2, 2, 2}));
+}
+
+TEST(SequenceSegmenter, LengthCapAndIds) {
+  SequenceParams p;
+  EXPECT_EQ(segment(std::vector<double>(39, 0.01), p), (std::vector<std::size_t>{15, 15, 10}));
+  p.max_length = 4;
+  EXPECT_EQ(segment(std::vector<double>(9, 0.0), p), (std::vector<std::size_t>{4, 4, 2}));
+  SequenceSegmenter seg(p);
+  EXPECT_FALSE(seg.add(7, yaw(0), one_word(1)).has_value());
+  const auto closed = seg.add(8, yaw(1.0), one_word(2));
+  ASSERT_TRUE(closed.has_value());
+  EXPECT_EQ(closed->id, 0U);
+  EXPECT_EQ(closed->keyframes, (std::vector<KeyframeId>{7}));
+  EXPECT_EQ(seg.open_id(), 1U);
+  EXPECT_EQ(seg.open_keyframes(), (std::vector<KeyframeId>{8}));
+}
+
+TEST(SequenceSegmenter, SequenceVectorIsNormalisedSum) {
+  SequenceSegmenter seg(SequenceParams{});
+  seg.add(0, yaw(0), BowVector::from_entries({{1, 3.0}, {2, 1.0}}));  // normalised: .75 .25
+  seg.add(1, yaw(0.01), BowVector::from_entries({{2, 10.0}}));        // normalised: 1
+  const auto s = seg.flush();
+  ASSERT_TRUE(s.has_value());
+  EXPECT_NEAR(s->bow.l1_norm(), 1.0, 1e-12);
+  EXPECT_NEAR(s->bow.weight(1), 0.375, 1e-12);
+  EXPECT_NEAR(s->bow.weight(2), 0.625, 1e-12);
+  EXPECT_FALSE(seg.flush().has_value());
+}
+
+TEST(SequenceParams, RejectsBadValues) {
+  SequenceParams p;
+  p.min_length = 20;
+  EXPECT_THROW(SequenceSegmenter{p}, sp::Error);
+  p = SequenceParams{};
+  p.theta_t = 0.0;
+  EXPECT_THROW(p.validate(), sp::Error);
+  const auto r = sp::ConfigReader::from_string("theta_t: 0.2\nmax_length: 10\nmin_length: 3\n", "test.yaml");
+  const SequenceParams q = SequenceParams::from_yaml(r);
+  r.finish();
+  EXPECT_DOUBLE_EQ(q.theta_t, 0.2);
+  EXPECT_EQ(q.max_length, 10);
+  EXPECT_EQ(q.min_length, 3);
+  EXPECT_THROW(SequenceParams::from_yaml(sp::ConfigReader::from_string("max_length: 0\n", "bad.yaml")),
+               sp::ConfigError);
+}
+
+}  // namespace
+}  // namespace sp::loop
