@@ -1,13 +1,16 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <climits>
 #include <random>
+#include <set>
 
 #include "stillpoint/common/error.hpp"
 #include "stillpoint/features/descriptor.hpp"
 #include "stillpoint/features/feature_grid.hpp"
 #include "stillpoint/features/matching.hpp"
+#include "stillpoint/features/orb_extractor.hpp"
 #include "stillpoint/features/orb_pattern.hpp"
 
 namespace sp::feat {
@@ -72,6 +75,28 @@ TEST(OrbPatternTest, FixedDeterministicAndInsideDisc) {
   EXPECT_LT(mean_sq, 80.0);
   // Pinned: a change of the pattern invalidates every vocabulary trained on our descriptors.
   EXPECT_EQ(a.fingerprint(), 0x50b9a505cb71719aULL) << std::hex << a.fingerprint();
+}
+
+TEST(OrbPatternTest, StandardIsASelectionOfGeneratedCandidates) {
+  const OrbPattern st = OrbPattern::standard();
+  std::set<std::array<int, 4>> candidates;
+  for (std::uint64_t k = 0; k < 64; ++k) {
+    const OrbPattern g = OrbPattern::generate(OrbPattern::kDefaultSeed + k);
+    for (std::size_t i = 0; i < OrbPattern::kPairs; ++i) {
+      candidates.insert({g.x[2 * i], g.y[2 * i], g.x[2 * i + 1], g.y[2 * i + 1]});
+    }
+  }
+  std::set<std::array<int, 4>> seen;
+  for (std::size_t i = 0; i < OrbPattern::kPairs; ++i) {
+    const std::array<int, 4> t{st.x[2 * i], st.y[2 * i], st.x[2 * i + 1], st.y[2 * i + 1]};
+    EXPECT_TRUE(candidates.count(t)) << "pair " << i;
+    EXPECT_TRUE(seen.insert(t).second) << "duplicate pair " << i;
+    EXPECT_LE(t[0] * t[0] + t[1] * t[1], 225);
+    EXPECT_LE(t[2] * t[2] + t[3] * t[3], 225);
+  }
+  // Pinned like generate(): the extractor's default descriptors depend on this table.
+  EXPECT_EQ(st.fingerprint(), 0xdd9b5ef30dffc890ULL) << std::hex << st.fingerprint();
+  EXPECT_EQ(OrbExtractor(OrbConfig{}).pattern().fingerprint(), st.fingerprint());
 }
 
 TEST(MatchRatio, AgreesWithBruteForce) {

@@ -115,7 +115,10 @@ void steered_brief(const std::uint8_t* c, int step, float angle_deg, const float
 
 }  // namespace
 
-OrbExtractor::OrbExtractor(const OrbConfig& config) : config_(config), pattern_(OrbPattern::generate()) {
+OrbExtractor::OrbExtractor(const OrbConfig& config) : OrbExtractor(config, OrbPattern::standard()) {}
+
+OrbExtractor::OrbExtractor(const OrbConfig& config, const OrbPattern& pattern)
+    : config_(config), pattern_(pattern) {
   config_.validate();
   const auto L = static_cast<std::size_t>(config_.n_levels);
   scale_.resize(L);

@@ -35,6 +35,8 @@ class OrbExtractor {
   static constexpr int kCellSize = 30;   // FAST detection cell size [px]
 
   explicit OrbExtractor(const OrbConfig& config);
+  // With another sampling pattern (for experiments; descriptors then differ from the default).
+  OrbExtractor(const OrbConfig& config, const OrbPattern& pattern);
 
   // gray: CV_8UC1 image. mask (optional): CV_8UC1 of the same size, 0 = do not detect there.
   // keypoints in level-0 pixels, octave = level, angle in degrees [0, 360), size = 31 * scale.
@@ -53,6 +55,7 @@ class OrbExtractor {
   // The pyramid of the last extract() call (level images without padding; views into buffers).
   [[nodiscard]] cv::Mat level_image(int level) const;
   [[nodiscard]] const OrbConfig& config() const noexcept { return config_; }
+  [[nodiscard]] const OrbPattern& pattern() const noexcept { return pattern_; }
 
  private:
   void build_pyramid(const cv::Mat& gray);
