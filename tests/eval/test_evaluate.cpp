@@ -203,3 +203,24 @@ TEST(Evaluate, JsonAndTableCarryTheFigures) {
 
 }  // namespace
 }  // namespace sp::eval
+
+namespace sp::eval {
+namespace {
+
+TEST(EvalOptions, FromYamlReadsChoicesAndRejectsUnknownValues) {
+  const auto r =
+      ConfigReader::from_string("align: sim3\ndelta: 30\ndelta_unit: f\noffset: 0.5\n", "eval.yaml");
+  const auto o = EvalOptions::from_yaml(r);
+  r.finish();
+  EXPECT_EQ(o.align, Alignment::Sim3);
+  EXPECT_EQ(o.delta_unit, DeltaUnit::Frames);
+  EXPECT_DOUBLE_EQ(o.delta, 30.0);
+  EXPECT_DOUBLE_EQ(o.offset, 0.5);
+  EXPECT_DOUBLE_EQ(o.max_difference, 0.02);
+  EXPECT_THROW((void)EvalOptions::from_yaml(ConfigReader::from_string("align: affine\n", "e.yaml")),
+               ConfigError);
+  EXPECT_THROW((void)EvalOptions::from_yaml(ConfigReader::from_string("delta: -1\n", "e.yaml")), ConfigError);
+}
+
+}  // namespace
+}  // namespace sp::eval

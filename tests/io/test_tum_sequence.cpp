@@ -141,3 +141,32 @@ TEST(TumSequence, MalformedListIsAnErrorAtConstruction) {
 
 }  // namespace
 }  // namespace sp::io
+
+namespace sp::io {
+namespace {
+
+TEST(TumSequenceOptions, FromYamlReadsKeysAndChecksRanges) {
+  const auto r = ConfigReader::from_string(
+      "prefetch: 3\nmax_frames: 10\nstart_frame: 2\ndepth_offset: -0.01\n"
+      "camera_file: cam.yaml\n",
+      "opts.yaml");
+  const auto o = TumSequenceOptions::from_yaml(r);
+  r.finish();
+  EXPECT_EQ(o.prefetch, 3u);
+  EXPECT_EQ(o.max_frames, 10u);
+  EXPECT_EQ(o.start_frame, 2u);
+  EXPECT_DOUBLE_EQ(o.depth_offset, -0.01);
+  EXPECT_DOUBLE_EQ(o.max_difference, 0.02);  // default kept
+  ASSERT_TRUE(o.camera_file.has_value());
+  EXPECT_EQ(*o.camera_file, std::filesystem::path("cam.yaml"));
+  try {
+    (void)TumSequenceOptions::from_yaml(ConfigReader::from_string("a: 1\nprefetch: 0\n", "opts.yaml"));
+    ADD_FAILURE() << "prefetch 0 accepted";
+  } catch (const ConfigError& e) {
+    EXPECT_EQ(e.key(), "prefetch");
+    EXPECT_EQ(e.line(), 2);
+  }
+}
+
+}  // namespace
+}  // namespace sp::io

@@ -122,6 +122,19 @@ void evaluate_rpe(const std::vector<io::StampedPose>& gt, const std::vector<io::
 
 }  // namespace
 
+EvalOptions EvalOptions::from_yaml(const ConfigReader& r) {
+  EvalOptions o;
+  std::string align = "se3", unit = "s";
+  r.read_choice("align", align, {"se3", "sim3", "none"});
+  o.align = align == "sim3" ? Alignment::Sim3 : align == "none" ? Alignment::None : Alignment::SE3;
+  r.read("delta", o.delta, 1e-9, 1e6);
+  r.read_choice("delta_unit", unit, {"s", "f"});
+  o.delta_unit = unit == "f" ? DeltaUnit::Frames : DeltaUnit::Seconds;
+  r.read("max_difference", o.max_difference, 1e-6, 10.0);
+  r.read("offset", o.offset, -1e4, 1e4);
+  return o;
+}
+
 EvalResult evaluate(const std::vector<io::StampedPose>& gt_in, const std::vector<io::StampedPose>& est_in,
                     const EvalOptions& options) {
   if (!(options.delta > 0)) throw Error("evaluate: delta must be positive");

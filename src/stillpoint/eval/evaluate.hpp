@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "stillpoint/common/config_reader.hpp"
 #include "stillpoint/eval/stats.hpp"
 #include "stillpoint/geometry/alignment.hpp"
 #include "stillpoint/io/trajectory_io.hpp"
@@ -21,6 +22,10 @@ struct EvalOptions {
   DeltaUnit delta_unit = DeltaUnit::Seconds;
   double max_difference = 0.02;  // s, ATE association window
   double offset = 0;             // s, added to estimate stamps
+
+  // Keys: align (se3|sim3|none), delta (0, 1e6], delta_unit (s|f), max_difference [1e-6, 10] s,
+  // offset [-1e4, 1e4] s.
+  static EvalOptions from_yaml(const ConfigReader& r);
 };
 
 struct EvalResult {

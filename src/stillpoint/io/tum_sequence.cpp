@@ -12,6 +12,17 @@ namespace sp::io {
 
 namespace fs = std::filesystem;
 
+TumSequenceOptions TumSequenceOptions::from_yaml(const ConfigReader& r) {
+  TumSequenceOptions o;
+  if (r.has("camera_file")) o.camera_file = fs::path(r.require<std::string>("camera_file"));
+  r.read<std::size_t>("prefetch", o.prefetch, 1, 1024);
+  r.read("max_difference", o.max_difference, 1e-4, 1.0);
+  r.read("depth_offset", o.depth_offset, -1.0, 1.0);
+  r.read<std::size_t>("max_frames", o.max_frames, 0, 100000000);
+  r.read<std::size_t>("start_frame", o.start_frame, 0, 100000000);
+  return o;
+}
+
 TumSequence::TumSequence(const fs::path& dir, const TumSequenceOptions& options)
     : dir_(dir), queue_(options.prefetch == 0 ? 1 : options.prefetch) {
   if (!fs::is_directory(dir_)) throw InputError(dir_.string(), 0, "sequence folder not found");

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "stillpoint/common/bounded_queue.hpp"
+#include "stillpoint/common/config_reader.hpp"
 #include "stillpoint/io/frame_source.hpp"
 
 namespace sp::io {
@@ -19,6 +20,10 @@ struct TumSequenceOptions {
   double depth_offset = 0;       // s, added to depth stamps when associating
   std::size_t max_frames = 0;    // 0 = all
   std::size_t start_frame = 0;   // first associated frame to deliver
+
+  // Keys: camera_file, prefetch [1, 1024], max_difference [1e-4, 1] s, depth_offset [-1, 1] s,
+  // max_frames, start_frame. A relative camera_file is taken as written (relative to the working dir).
+  static TumSequenceOptions from_yaml(const ConfigReader& r);
 };
 
 class TumSequence : public FrameSource {
