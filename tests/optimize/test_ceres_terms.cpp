@@ -2,6 +2,8 @@
 // central-difference derivative of the residual along SE3Manifold::Plus.
 #include <gtest/gtest.h>
 
+#include <atomic>
+
 #include "stillpoint/optimize/ceres_terms.hpp"
 #include "synthetic.hpp"
 
@@ -124,6 +126,63 @@ TEST(CeresTerms, PoseGraphCostJacobians) {
       EXPECT_LT((num[b] - ana[b]).norm(), 1e-6) << "block " << b << " trial " << trial;
     }
   }
+}
+
+// Raises the abort flag at the n-th cost evaluation, i.e. in the middle of a solve.
+class RaiseFlagAt final : public ceres::EvaluationCallback {
+ public:
+  RaiseFlagAt(std::atomic<bool>* flag, int n) : flag_(flag), n_(n) {}
+  void PrepareForEvaluation(bool /*jacobians*/, bool /*new_point*/) override {
+    if (++calls_ == n_) flag_->store(true);
+  }
+
+ private:
+  std::atomic<bool>* flag_;
+  int n_;
+  int calls_ = 0;
+};
+
+TEST(CeresTerms, AbortCallbackStopsASolveMidway) {
+  // A drifted 4-pose loop that needs several LM iterations.
+  std::mt19937 rng(8);
+  std::vector<geo::SE3> truth;
+  for (int k = 0; k < 4; ++k) truth.push_back(geo::SE3::exp(test::random_xi(rng, 1.0, 0.5)));
+  const auto solve = [&](std::atomic<bool>* flag, int raise_at) {
+    std::vector<PoseParams> params;
+    for (const geo::SE3& T : truth)
+      params.push_back(to_params(geo::SE3::exp(test::random_xi(rng, 0.5, 0.5)) * T));
+    SE3Manifold manifold;
+    ceres::Problem::Options popts;
+    popts.manifold_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+    RaiseFlagAt raiser(flag, raise_at);
+    popts.evaluation_callback = &raiser;
+    ceres::Problem problem(popts);
+    for (int k = 0; k < 4; ++k) {
+      const int j = (k + 1) % 4;
+      problem.AddResidualBlock(new PoseGraphCost(truth[k] * truth[j].inverse(), 1.0), nullptr,
+                               params[k].data(), params[j].data());
+    }
+    for (auto& p : params) problem.SetManifold(p.data(), &manifold);
+    problem.SetParameterBlockConstant(params[0].data());
+    AbortCallback abort(flag);
+    ceres::Solver::Options options;
+    options.max_num_iterations = 50;
+    options.function_tolerance = 1e-16;
+    options.gradient_tolerance = 1e-16;
+    options.parameter_tolerance = 1e-16;
+    options.callbacks.push_back(&abort);
+    ceres::Solver::Summary summary;
+    ceres::Solve(options, &problem, &summary);
+    return summary;
+  };
+  std::atomic<bool> flag{false};
+  const ceres::Solver::Summary free_run = solve(&flag, 1000000);
+  EXPECT_NE(free_run.termination_type, ceres::USER_SUCCESS);
+  ASSERT_GT(free_run.iterations.size(), 4u);
+  flag = false;
+  const ceres::Solver::Summary stopped = solve(&flag, 3);
+  EXPECT_EQ(stopped.termination_type, ceres::USER_SUCCESS);
+  EXPECT_LE(stopped.iterations.size(), 3u);
 }
 
 }  // namespace
