@@ -220,3 +220,76 @@ TEST(FeatureGridTest, AgreesWithBruteForce) {
 
 }  // namespace
 }  // namespace sp::feat
+
+namespace sp::feat {
+namespace {
+
+TEST(DistinctiveDescriptor, MinimisesMedianDistance) {
+  std::mt19937 rng(21);
+  for (int trial = 0; trial < 20; ++trial) {
+    const int n = 1 + trial % 7;
+    const cv::Mat d = random_descriptors(n, rng);
+    std::vector<const std::uint8_t*> ptrs;
+    for (int i = 0; i < n; ++i) ptrs.push_back(d.ptr<std::uint8_t>(i));
+    int best = -1, best_median = 1000;
+    for (int i = 0; i < n; ++i) {
+      std::vector<int> dist;
+      for (int j = 0; j < n; ++j)
+        dist.push_back(
+            hamming_reference(ptrs[static_cast<std::size_t>(i)], ptrs[static_cast<std::size_t>(j)]));
+      std::sort(dist.begin(), dist.end());
+      const int median = dist[static_cast<std::size_t>((n - 1) / 2)];
+      if (median < best_median) best_median = median, best = i;
+    }
+    EXPECT_EQ(distinctive_descriptor_index(ptrs), best) << "trial " << trial;
+  }
+  // Hand-worked: two near-identical descriptors and an outlier: one of the pair wins.
+  cv::Mat d = cv::Mat::zeros(3, 32, CV_8UC1);
+  d.at<std::uint8_t>(1, 0) = 1;
+  d.row(2).setTo(0xFF);
+  EXPECT_EQ(distinctive_descriptor_index({d.ptr(2), d.ptr(0), d.ptr(1)}), 1);
+  EXPECT_EQ(distinctive_descriptor_index({}), -1);
+}
+
+TEST(BestInArea, AgreesWithBruteForce) {
+  std::mt19937 rng(4);
+  std::uniform_real_distribution<float> ux(0.f, 640.f), uy(0.f, 480.f);
+  std::uniform_int_distribution<int> level(0, 7);
+  const int n = 600;
+  std::vector<cv::Point2f> pts(n);
+  std::vector<int> oct(n);
+  for (int i = 0; i < n; ++i)
+    pts[static_cast<std::size_t>(i)] = {ux(rng), uy(rng)}, oct[static_cast<std::size_t>(i)] = level(rng);
+  const cv::Mat desc = random_descriptors(n, rng);
+  const cv::Mat queries = random_descriptors(100, rng);
+  const FeatureGrid grid(pts, oct, cv::Size(640, 480));
+  std::vector<std::size_t> scratch;
+  for (int q = 0; q < queries.rows; ++q) {
+    const float x = ux(rng), y = uy(rng), r = 60.f;
+    const int lo = q % 2 == 0 ? -1 : 2, hi = q % 3 == 0 ? -1 : 5;
+    const auto skip = [](std::size_t i) { return i % 5 == 0; };
+    const AreaMatch m =
+        best_in_area(grid, desc, queries.ptr<std::uint8_t>(q), x, y, r, lo, hi, scratch, skip);
+    int best = AreaMatch::kNone, second = AreaMatch::kNone, best_i = -1;
+    for (int i = 0; i < n; ++i) {
+      const auto u = static_cast<std::size_t>(i);
+      if (skip(u) || (lo >= 0 && oct[u] < lo) || (hi >= 0 && oct[u] > hi)) continue;
+      if (std::abs(pts[u].x - x) >= r || std::abs(pts[u].y - y) >= r) continue;
+      const int d = hamming_reference(queries.ptr(q), desc.ptr(i));
+      if (d < best) {
+        second = best, best = d, best_i = i;
+      } else if (d < second) {
+        second = d;
+      }
+    }
+    ASSERT_EQ(m.index, best_i) << q;
+    EXPECT_EQ(m.distance, best);
+    EXPECT_EQ(m.second_distance, second);
+    if (best_i >= 0) {
+      EXPECT_EQ(m.level, oct[static_cast<std::size_t>(best_i)]);
+    }
+  }
+}
+
+}  // namespace
+}  // namespace sp::feat

@@ -4,6 +4,7 @@
 #include <cstdint>
 #include <cstring>
 #include <opencv2/core/mat.hpp>
+#include <vector>
 
 namespace sp::feat {
 
@@ -20,6 +21,10 @@ inline int hamming_distance(const std::uint8_t* a, const std::uint8_t* b) {
   }
   return d;
 }
+
+// The descriptor with the least median distance to the others (ORB-SLAM's representative
+// descriptor of a map point seen in several keyframes); -1 when `descs` is empty.
+int distinctive_descriptor_index(const std::vector<const std::uint8_t*>& descs);
 
 // Rows of descriptor matrices (1 x 32, CV_8U). Throws sp::Error on another shape or type.
 int hamming_distance(const cv::Mat& a_row, const cv::Mat& b_row);

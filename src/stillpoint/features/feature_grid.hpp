@@ -24,6 +24,8 @@ class FeatureGrid {
                int max_level = -1) const;
 
   [[nodiscard]] std::size_t size() const noexcept { return points_.size(); }
+  [[nodiscard]] const cv::Point2f& point(std::size_t i) const { return points_[i]; }
+  [[nodiscard]] int octave(std::size_t i) const { return octaves_[i]; }
   [[nodiscard]] int cols() const noexcept { return cols_; }
   [[nodiscard]] int rows() const noexcept { return rows_; }
 

@@ -5,6 +5,9 @@
 #include <opencv2/core/mat.hpp>
 #include <vector>
 
+#include "stillpoint/features/descriptor.hpp"
+#include "stillpoint/features/feature_grid.hpp"
+
 namespace sp::feat {
 
 // Descriptor distance thresholds typical of ORB-SLAM (bits out of 256).
@@ -23,6 +26,43 @@ struct DescriptorMatch {
 // Descriptors: N x 32 CV_8U (either may be empty). Sorted by query index.
 std::vector<DescriptorMatch> match_ratio(const cv::Mat& query, const cv::Mat& train, float ratio = 0.8f,
                                          int max_distance = 64, bool cross_check = false);
+
+// Result of a guided search around a predicted position (ORB-SLAM's search by projection).
+struct AreaMatch {
+  static constexpr int kNone = 257;  // distance when there is no such feature
+  int index = -1;                    // best feature, -1 when none
+  int distance = kNone;              // its Hamming distance [bits]
+  int level = -1;                    // its octave
+  int second_distance = kNone;       // the runner-up's distance [bits]
+  int second_level = -1;             // the runner-up's octave
+};
+
+// Best and second-best descriptor among the grid's features in the square window of `radius`
+// around (x, y) with octave in [min_level, max_level] (bounds < 0: unbounded), skipping the
+// indices for which skip(index) is true (e.g. already matched). `descriptors`: rows of the frame
+// the grid was built from; `scratch` avoids an allocation per call.
+template <typename Skip>
+AreaMatch best_in_area(const FeatureGrid& grid, const cv::Mat& descriptors, const std::uint8_t* query,
+                       float x, float y, float radius, int min_level, int max_level,
+                       std::vector<std::size_t>& scratch, Skip&& skip) {
+  AreaMatch m;
+  grid.in_area(x, y, radius, scratch, min_level, max_level);
+  for (std::size_t i : scratch) {
+    if (skip(i)) continue;
+    const int d = hamming_distance(query, descriptors.ptr<std::uint8_t>(static_cast<int>(i)));
+    if (d < m.distance) {
+      m.second_distance = m.distance;
+      m.second_level = m.level;
+      m.distance = d;
+      m.level = grid.octave(i);
+      m.index = static_cast<int>(i);
+    } else if (d < m.second_distance) {
+      m.second_distance = d;
+      m.second_level = grid.octave(i);
+    }
+  }
+  return m;
+}
 
 // Histogram of keypoint angle differences of matches: matches whose rotation disagrees with the
 // dominant ones are outliers.
