@@ -2,14 +2,131 @@
 #include <spdlog/spdlog.h>
 
 #include <CLI/CLI.hpp>
+#include <Eigen/Geometry>
 #include <filesystem>
+#include <fstream>
+#include <map>
 #include <memory>
+#include <opencv2/imgcodecs.hpp>
+#include <sstream>
 
 #include "commands.hpp"
+#include "stillpoint/common/error.hpp"
 #include "stillpoint/common/timing.hpp"
+#include "stillpoint/features/orb_extractor.hpp"
+#include "stillpoint/loop/loop_detector.hpp"
 #include "stillpoint/loop/vocab_trainer.hpp"
 
 namespace sp::app {
+namespace {
+
+// `timestamp rest...` lines of a TUM text file, '#' comments skipped.
+std::vector<std::pair<double, std::string>> read_stamped(const std::filesystem::path& file) {
+  std::ifstream in(file);
+  if (!in) throw sp::InputError(file.string(), 0, "cannot open");
+  std::vector<std::pair<double, std::string>> out;
+  std::string line;
+  int n = 0;
+  while (std::getline(in, line)) {
+    ++n;
+    if (line.empty() || line[0] == '#') continue;
+    std::istringstream ss(line);
+    double t = 0;
+    if (!(ss >> t)) throw sp::InputError(file.string(), n, "expected a timestamp");
+    std::string rest;
+    std::getline(ss, rest);
+    out.emplace_back(t, rest);
+  }
+  return out;
+}
+
+struct Pose {
+  Eigen::Quaterniond q_wc;
+  Eigen::Vector3d t_wc;
+};
+
+// A loop-detection dry run on a TUM sequence: keyframes every N frames, camera rotations and the
+// "map" covisibility (temporal window) taken from the ground truth, candidates judged by the
+// ground-truth distance between the two keyframes. Compares the per-keyframe and sequence detectors.
+void evaluate_loops(const std::filesystem::path& seq, const std::filesystem::path& vocab_file, int every,
+                    int window) {
+  const auto vocab = sp::loop::Vocabulary::load(vocab_file);
+  const auto rgb = read_stamped(seq / "rgb.txt");
+  std::map<double, Pose> gt;
+  for (const auto& [t, rest] : read_stamped(seq / "groundtruth.txt")) {
+    std::istringstream ss(rest);
+    Pose p;
+    double qx, qy, qz, qw;
+    ss >> p.t_wc.x() >> p.t_wc.y() >> p.t_wc.z() >> qx >> qy >> qz >> qw;
+    p.q_wc = Eigen::Quaterniond(qw, qx, qy, qz).normalized();
+    gt[t] = p;
+  }
+  sp::feat::OrbExtractor orb(sp::feat::OrbConfig{});
+  std::vector<sp::loop::KeyframeInfo> kfs;
+  std::vector<Pose> poses;
+  for (std::size_t i = 0; i < rgb.size(); i += static_cast<std::size_t>(every)) {
+    const auto it = gt.lower_bound(rgb[i].first);
+    if (it == gt.end() || std::abs(it->first - rgb[i].first) > 0.02) continue;
+    std::string path = rgb[i].second;
+    path.erase(0, path.find_first_not_of(' '));
+    const cv::Mat gray = cv::imread((seq / path).string(), cv::IMREAD_GRAYSCALE);
+    if (gray.empty()) throw sp::InputError((seq / path).string(), 0, "cannot read the image");
+    std::vector<cv::KeyPoint> kps;
+    cv::Mat desc;
+    orb.extract(gray, kps, desc);
+    sp::loop::KeyframeInfo kf;
+    kf.id = kfs.size();
+    kf.R_cw = it->second.q_wc.toRotationMatrix().transpose();
+    kf.bow = vocab.transform(desc);
+    kfs.push_back(std::move(kf));
+    poses.push_back(it->second);
+  }
+  struct Window final : sp::loop::CovisibilityView {
+    int w = 0;
+    sp::loop::KeyframeId newest = 0;
+    [[nodiscard]] std::vector<sp::loop::KeyframeId> covisible(sp::loop::KeyframeId id,
+                                                              int n_best) const override {
+      std::vector<sp::loop::KeyframeId> out;
+      for (int d = 1; d <= w; ++d) {
+        if (id >= static_cast<sp::loop::KeyframeId>(d)) out.push_back(id - d);
+        if (id + d <= newest) out.push_back(id + d);
+      }
+      if (n_best > 0 && out.size() > static_cast<std::size_t>(n_best))
+        out.resize(static_cast<std::size_t>(n_best));
+      return out;
+    }
+  } view;
+  view.w = window;
+  for (const char* method : {"bow-keyframe", "bow-sequence"}) {
+    auto det = sp::loop::make_loop_detector(method, sp::loop::LoopDetectorParams{});
+    std::vector<double> ms;
+    std::size_t good = 0, bad = 0;
+    std::string first = "none";
+    for (const auto& kf : kfs) {
+      view.newest = kf.id;
+      sp::Stopwatch sw;
+      const auto cands = det->detect(kf, view);
+      ms.push_back(sw.elapsed_ms());
+      for (const auto& c : cands) {
+        const Pose& a = poses[c.query];
+        const Pose& b = poses[c.match];
+        const bool ok = (a.t_wc - b.t_wc).norm() < 0.5 && a.q_wc.angularDistance(b.q_wc) < 0.5;
+        (ok ? good : bad) += 1;
+        if (first == "none") first = std::to_string(kf.id);
+      }
+    }
+    const auto st = det->stats();
+    const auto sum = sp::summarize(ms);
+    spdlog::info(
+        "{:13s} keyframes {} queries {} scored pairs {} candidates {} (GT-correct {}, wrong {}), first at kf "
+        "{}, "
+        "detect total {:.2f} ms, mean {:.3f} ms/kf",
+        method, st.keyframes, st.queries, st.scored_pairs, st.candidates, good, bad, first, sum.total,
+        sum.mean);
+  }
+}
+
+}  // namespace
 
 void add_vocab_command(CLI::App& app) {
   auto* vocab = app.add_subcommand("vocab", "Train or inspect the ORB bag-of-words vocabulary");
@@ -60,6 +177,22 @@ void add_vocab_command(CLI::App& app) {
                  *file, v.size(), weighted, v.node_count(), v.branching(), v.levels(),
                  static_cast<double>(std::filesystem::file_size(*file)) / 1e6, ms);
   });
+
+  auto seq = std::make_shared<std::string>();
+  auto vfile = std::make_shared<std::string>(std::string(SP_SOURCE_DIR) + "/data/vocab/stillpoint_orb.spv");
+  auto every = std::make_shared<int>(10);
+  auto window = std::make_shared<int>(10);
+  auto* loops =
+      vocab->add_subcommand("loops", "Dry-run both loop detectors on a TUM sequence (ground-truth poses)");
+  loops->add_option("--sequence", *seq, "TUM sequence folder (rgb.txt, groundtruth.txt)")->required();
+  loops->add_option("--vocab", *vfile, "vocabulary file")->capture_default_str();
+  loops->add_option("--every", *every, "a keyframe every N frames")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 1000));
+  loops->add_option("--window", *window, "keyframes this close in time count as covisible")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 1000));
+  loops->callback([=] { evaluate_loops(*seq, *vfile, *every, *window); });
 }
 
 }  // namespace sp::app

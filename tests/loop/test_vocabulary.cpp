@@ -3,6 +3,7 @@
 #include <filesystem>
 #include <fstream>
 #include <opencv2/features2d.hpp>
+#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <random>
 
@@ -253,6 +254,35 @@ TEST_F(TrainedVocabulary, TrainingIsDeterministicForASeed) {
   p.k = 6;
   p.levels = 3;
   EXPECT_TRUE(Vocabulary::train(descriptors_, p, 42) == vocab_);
+}
+
+}  // namespace
+}  // namespace sp::loop
+
+namespace sp::loop {
+namespace {
+
+TEST(ShippedVocabulary, LoadsAndDescribesRealFrames) {
+  const std::filesystem::path file = std::filesystem::path(SP_SOURCE_DIR) / "data/vocab/stillpoint_orb.spv";
+  const Vocabulary v = Vocabulary::load(file);
+  EXPECT_EQ(v.branching(), 10);
+  EXPECT_EQ(v.levels(), 5);
+  EXPECT_GT(v.size(), 50000U);
+  EXPECT_LE(v.size(), 100000U);
+  const auto dir = std::filesystem::path(SP_SHARED_DIR) / "data/dynsynth/office_a_static_xyz_150/rgb";
+  if (!std::filesystem::is_directory(dir)) GTEST_SKIP() << "no shared data at " << dir;
+  std::vector<std::filesystem::path> frames;
+  for (const auto& e : std::filesystem::directory_iterator(dir)) frames.push_back(e.path());
+  std::sort(frames.begin(), frames.end());
+  ASSERT_GE(frames.size(), 100U);
+  const auto bow_of = [&](const std::filesystem::path& f) {
+    return v.transform(orb(cv::imread(f.string(), cv::IMREAD_GRAYSCALE)));
+  };
+  const BowVector a = bow_of(frames[0]);
+  EXPECT_GT(a.size(), 100U);
+  EXPECT_NEAR(l1_score(a, a), 1.0, 1e-9);
+  // The next frame (33 ms later) looks more alike than a frame of the same desk seconds later.
+  EXPECT_GT(l1_score(a, bow_of(frames[1])), l1_score(a, bow_of(frames[99])));
 }
 
 }  // namespace
