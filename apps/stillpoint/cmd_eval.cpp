@@ -1,6 +1,7 @@
 // stillpoint eval: ATE / RPE of an estimated trajectory against ground truth (TUM definitions).
 #include <spdlog/spdlog.h>
 
+#include <filesystem>
 #include <fstream>
 #include <iostream>
 #include <map>
@@ -33,7 +34,10 @@ void run_eval(const EvalArgs& a) {
                                 : eval::Alignment::SE3;
   o.max_difference = a.max_difference;
   o.offset = a.offset;
-  const auto gt = io::read_tum_trajectory(a.gt);
+  // A sequence folder stands for its groundtruth.txt.
+  std::filesystem::path gt_file = a.gt;
+  if (std::filesystem::is_directory(gt_file)) gt_file /= "groundtruth.txt";
+  const auto gt = io::read_tum_trajectory(gt_file);
   const auto est = io::read_tum_trajectory(a.est);
   const eval::EvalResult r = eval::evaluate(gt, est, o);
   std::cout << eval::format_table(r) << std::flush;
@@ -55,9 +59,9 @@ void add_eval_command(CLI::App& app) {
   auto args = std::make_shared<EvalArgs>();
   CLI::App* cmd =
       app.add_subcommand("eval", "ATE / RPE of an estimated trajectory against ground truth (TUM)");
-  cmd->add_option("--gt", args->gt, "ground-truth trajectory (TUM format)")
+  cmd->add_option("--gt", args->gt, "ground-truth trajectory (TUM format), or a sequence folder")
       ->required()
-      ->check(CLI::ExistingFile);
+      ->check(CLI::ExistingPath);
   cmd->add_option("--est", args->est, "estimated trajectory (TUM format)")
       ->required()
       ->check(CLI::ExistingFile);
