@@ -287,3 +287,22 @@ TEST(ShippedVocabulary, LoadsAndDescribesRealFrames) {
 
 }  // namespace
 }  // namespace sp::loop
+
+namespace sp::loop {
+namespace {
+
+TEST(VocabularyParams, ReadsAndChecksYaml) {
+  const auto r = sp::ConfigReader::from_string("k: 8\nlevels: 6\n", "vocab.yaml");
+  const VocabularyParams p = VocabularyParams::from_yaml(r);
+  r.finish();
+  EXPECT_EQ(p.k, 8);
+  EXPECT_EQ(p.levels, 6);
+  EXPECT_THROW(VocabularyParams::from_yaml(sp::ConfigReader::from_string("k: 1\n", "bad.yaml")), sp::ConfigError);
+  VocabularyParams bad;
+  bad.levels = 0;
+  EXPECT_THROW(Vocabulary::train({cv::Mat(4, 32, CV_8U, cv::Scalar(1))}, bad, 1), sp::Error);
+  EXPECT_THROW(Vocabulary::train({}, VocabularyParams{}, 1), sp::Error);
+}
+
+}  // namespace
+}  // namespace sp::loop

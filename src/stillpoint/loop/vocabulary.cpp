@@ -10,6 +10,7 @@
 #include <fstream>
 #include <limits>
 #include <random>
+#include <tuple>
 #include <unordered_set>
 
 #include "stillpoint/common/error.hpp"
