@@ -12,6 +12,7 @@
 #include "stillpoint/common/error.hpp"
 #include "stillpoint/common/timing.hpp"
 #include "stillpoint/dynamic/decoders.hpp"
+#include "stillpoint/dynamic/depth_lookup.hpp"
 
 namespace sp::dyn {
 
@@ -37,14 +38,6 @@ cv::Rect2f grow(const cv::Rect2f& r, float m) {
 
 bool inside(const cv::Rect2f& r, const cv::Point2f& p) {
   return p.x >= r.x && p.y >= r.y && p.x < r.x + r.width && p.y < r.y + r.height;
-}
-
-float raw_depth(const cv::Mat* depth, const cv::Point2f& p) {
-  if (depth == nullptr || depth->empty()) return 0.f;
-  const int u = static_cast<int>(std::lround(p.x)), v = static_cast<int>(std::lround(p.y));
-  if (u < 0 || v < 0 || u >= depth->cols || v >= depth->rows) return 0.f;
-  const float z = depth->at<float>(v, u);
-  return z > 0.f && std::isfinite(z) ? z : 0.f;
 }
 
 // Points to track: the strongest keypoint per grid cell (spread over the image), or corners.
@@ -220,6 +213,7 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
     history_.clear();
   }
 
+  const double t_flow = sw.elapsed_ms();
   // 2. Candidate boxes, carried from the detection's frame to this one.
   if (use_boxes && in.detections != nullptr) res.boxes = carry_boxes(*in.detections, in.frame_index);
   const auto margin = static_cast<float>(cfg_.box_margin_px);
@@ -252,6 +246,7 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
     for (std::size_t i = 0; i < n; ++i) moving[i] = res.flow_residual[i] > eps[i];
   }
   res.flow_point_moving = moving;
+  const double t_res = sw.elapsed_ms();
 
   // 4. Which boxes move.
   res.box_dynamic.assign(res.boxes.size(), false);
@@ -267,7 +262,8 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
       if (!inside(det.box, cur[i]) || res.flow_residual[i] < 0.f) continue;
       ++total;
       mov += moving[i] ? 1 : 0;
-      const float z = raw_depth(in.depth, cur[i]);
+      // Depth-edge points are left out: their depth may belong to the background.
+      const float z = has_depth ? stable_depth(*in.depth, cur[i]) : 0.f;
       if (z > 0.f) (moving[i] ? z_moving : z_all).push_back(z);
     }
     bool dyn = false;
@@ -331,29 +327,36 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
 
   // 6. Keypoints: inside a dynamic box (unless clearly behind the object), or nearest to a mover.
   const auto bg_margin = static_cast<float>(cfg_.background_depth_margin_m);
+  const auto nearest_flow = [&](const cv::Point2f& p) {
+    int nearest = -1;
+    float best = std::numeric_limits<float>::max();
+    grid.for_each_near(p, static_cast<float>(cfg_.unboxed_radius_px), [&](int j, float d2) {
+      if (d2 < best) best = d2, nearest = j;
+    });
+    return nearest;
+  };
   for (std::size_t k = 0; k < n_kp; ++k) {
     const cv::Point2f& p = (*in.keypoints)[k].pt;
     bool dyn = false;
     for (std::size_t b = 0; b < res.boxes.size() && !dyn; ++b) {
       if (!res.box_dynamic[b] || !inside(grow(res.boxes[b].box, margin), p)) continue;
       dyn = true;
+      // Depth-separated points in the box (background behind, furniture in front) are kept.
       if (cfg_.keep_background_in_box && object_depth[b] > 0.f) {
         const float z = raw_depth(in.depth, p);
-        if (z > object_depth[b] + bg_margin) dyn = false;
+        // No depth (edges, projector shadow): culled, missing a mover costs more than a lost point.
+        if (z > 0.f) dyn = std::abs(z - object_depth[b]) <= bg_margin;
       }
     }
     if (!dyn && cull_movers) {
-      int nearest = -1;
-      float best = std::numeric_limits<float>::max();
-      grid.for_each_near(p, static_cast<float>(cfg_.unboxed_radius_px), [&](int j, float d2) {
-        if (d2 < best) best = d2, nearest = j;
-      });
-      dyn = nearest >= 0 && confirmed[static_cast<std::size_t>(nearest)];
+      const int j = nearest_flow(p);
+      dyn = j >= 0 && confirmed[static_cast<std::size_t>(j)];
     }
     res.keypoint_dynamic[k] = dyn;
     res.culled += dyn ? 1 : 0;
   }
   res.ms = sw.elapsed_ms();
+  fprintf(stderr, "T flow %.2f res %.2f total %.2f n %zu kp %zu\n", t_flow, t_res, res.ms, n, n_kp);
   return res;
 }
 

@@ -29,7 +29,7 @@ struct MotionCheckConfig {
   // Residual used to call a point moving: "auto" = reprojection when depth and K are given (camera
   // motion from PnP-RANSAC on the flow, predicted pose as its initial guess), else epipolar.
   std::string residual = "auto";         // auto | epipolar | reprojection
-  int lk_window = 21;                    // px, LK window side [5, 61]
+  int lk_window = 15;                    // px, LK window side [5, 61]
   int lk_levels = 3;                     // pyramid levels above the base [0, 6]
   int max_points = 300;                  // tracked points per frame (keypoints bucketed on a grid) [20, 5000]
   int grid_cell_px = 24;                 // bucketing cell for picking tracked points [4, 200]
@@ -44,8 +44,10 @@ struct MotionCheckConfig {
   int min_points_to_decide = 5;         // fewer tracked points in a box: undecided [1, 1000]
   std::vector<std::string> always_dynamic_classes = {"person"};  // undecided boxes of these are dynamic
   int dynamic_hold_frames = 10;  // a box that moved stays dynamic this many frames (people pause) [0, 1000]
-  bool keep_background_in_box = true;      // keypoints much deeper than the object in its box are kept
-  double background_depth_margin_m = 0.5;  // "much deeper": > object depth + margin, metres [0.05, 10]
+  // Keypoints in a dynamic box whose depth differs from the object's by more than the margin
+  // (background behind it, furniture in front of it) are kept.
+  bool keep_background_in_box = true;
+  double background_depth_margin_m = 0.4;  // metres [0.05, 10]
   bool cull_unboxed_movers = true;         // moving point clusters outside boxes are culled too
   // A keypoint whose nearest tracked point (within this radius) is a confirmed mover is culled.
   double unboxed_radius_px = 30.0;  // px [1, 200]

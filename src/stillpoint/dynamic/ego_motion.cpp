@@ -8,30 +8,12 @@
 #include <opencv2/calib3d.hpp>
 #include <opencv2/core/eigen.hpp>
 
+#include "stillpoint/dynamic/depth_lookup.hpp"
 #include "stillpoint/dynamic/dynamic_filter.hpp"
 
 namespace sp::dyn {
 
 namespace {
-
-// Depth at a pixel when it is valid and its 3x3 neighbourhood agrees (no depth edge), else 0:
-// points on depth edges would get the wrong 3D position and look like movers.
-float stable_depth(const cv::Mat& depth, const cv::Point2f& p) {
-  const int u = static_cast<int>(std::lround(p.x)), v = static_cast<int>(std::lround(p.y));
-  if (u < 1 || v < 1 || u >= depth.cols - 1 || v >= depth.rows - 1) return 0.f;
-  float lo = std::numeric_limits<float>::max(), hi = 0.f;
-  for (int dv = -1; dv <= 1; ++dv) {
-    const float* row = depth.ptr<float>(v + dv);
-    for (int du = -1; du <= 1; ++du) {
-      const float z = row[u + du];
-      if (!(z > 0.f) || !std::isfinite(z)) return 0.f;
-      lo = std::min(lo, z);
-      hi = std::max(hi, z);
-    }
-  }
-  const float z = depth.at<float>(v, u);
-  return hi - lo < 0.02f + 0.03f * z ? z : 0.f;
-}
 
 // Distance of `x` to the epipolar line F * y (pixels); F maps points y to lines in x's image.
 float line_distance(const cv::Matx33d& F, const cv::Point2f& y, const cv::Point2f& x) {
