@@ -64,6 +64,7 @@ void evaluate_loops(const std::filesystem::path& seq, const std::filesystem::pat
   sp::feat::OrbExtractor orb(sp::feat::OrbConfig{});
   std::vector<sp::loop::KeyframeInfo> kfs;
   std::vector<Pose> poses;
+  std::vector<double> transform_ms;
   for (std::size_t i = 0; i < rgb.size(); i += static_cast<std::size_t>(every)) {
     const auto it = gt.lower_bound(rgb[i].first);
     if (it == gt.end() || std::abs(it->first - rgb[i].first) > 0.02) continue;
@@ -77,10 +78,14 @@ void evaluate_loops(const std::filesystem::path& seq, const std::filesystem::pat
     sp::loop::KeyframeInfo kf;
     kf.id = kfs.size();
     kf.R_cw = it->second.q_wc.toRotationMatrix().transpose();
+    sp::Stopwatch sw;
     kf.bow = vocab.transform(desc);
+    transform_ms.push_back(sw.elapsed_ms());
     kfs.push_back(std::move(kf));
     poses.push_back(it->second);
   }
+  spdlog::info("{} keyframes, BoW transform {:.2f} ms median per image", kfs.size(),
+               sp::summarize(transform_ms).median);
   struct Window final : sp::loop::CovisibilityView {
     int w = 0;
     sp::loop::KeyframeId newest = 0;
