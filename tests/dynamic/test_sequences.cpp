@@ -194,3 +194,86 @@ TEST(DynSynth, FlowOnly) {
 
 }  // namespace
 }  // namespace sp::dyn
+
+namespace sp::dyn {
+namespace {
+
+// vtest.avi: a fixed camera over a square with pedestrians. Walking people must be judged moving
+// and the static background must not.
+TEST(RealVideo, WalkingPeopleDynamicBackgroundStatic) {
+  const fs::path video = SP_SHARED_DIR "/data/people/opencv_vtest.avi";
+  const fs::path model = kModels / "yolo-fastest-1.1.cfg";
+  if (!fs::exists(video) || !fs::exists(model)) GTEST_SKIP();
+  cv::VideoCapture cap(video.string());
+  if (!cap.isOpened()) GTEST_SKIP() << "cannot decode " << video;
+  YoloDetector yolo(DetectorConfig::for_model(model));
+  DynamicFeatureFilter filter{MotionCheckConfig{}};
+  auto orb = cv::ORB::create(1000);
+  cv::Mat bgr, gray, prev;
+  int boxes = 0, dyn_boxes = 0, bg = 0, bg_moving = 0, still_boxes = 0, still_dynamic = 0;
+  std::vector<double> ms;
+  for (std::size_t i = 0; i < 60 && cap.read(bgr); ++i) {
+    cv::cvtColor(bgr, gray, cv::COLOR_BGR2GRAY);
+    std::vector<cv::KeyPoint> kps;
+    orb->detect(gray, kps);
+    Detections det = yolo.detect(bgr);
+    det.frame_index = i;
+    DynamicInput in;
+    in.frame_index = i;
+    in.prev_gray = prev.empty() ? nullptr : &prev;
+    in.gray = &gray;
+    in.keypoints = &kps;
+    in.detections = &det;
+    const DynamicResult r = filter.process(in);
+    if (i % 10 == 5) {  // control: the same frame twice (nothing moves) with a fresh filter
+      DynamicFeatureFilter fresh{MotionCheckConfig{}};
+      DynamicInput still = in;
+      still.prev_gray = &gray;
+      const DynamicResult z = fresh.process(still);
+      for (std::size_t b = 0; b < z.boxes.size(); ++b) {
+        int tracked = 0;
+        for (const auto& fp : z.flow_points) tracked += z.boxes[b].box.contains(fp);
+        if (tracked < MotionCheckConfig{}.min_points_to_decide) continue;
+        ++still_boxes;
+        still_dynamic += z.box_dynamic[b];
+      }
+    }
+    prev = gray.clone();
+    if (i == 0) continue;
+    ms.push_back(r.ms);
+    for (std::size_t b = 0; b < r.boxes.size(); ++b) {
+      if (r.boxes[b].box.height < 60) continue;  // far, tiny people barely move in pixels
+      int tracked = 0;
+      for (std::size_t p = 0; p < r.flow_points.size(); ++p)
+        tracked += r.boxes[b].box.contains(r.flow_points[p]);
+      if (tracked < MotionCheckConfig{}.min_points_to_decide) continue;  // judged by class, not by motion
+      ++boxes;
+      dyn_boxes += r.box_dynamic[b];
+    }
+    for (std::size_t p = 0; p < r.flow_points.size(); ++p) {
+      bool in_box = false;
+      for (const auto& d : r.boxes) {
+        const cv::Rect2f g(d.box.x - 10, d.box.y - 10, d.box.width + 20, d.box.height + 20);
+        in_box = in_box || g.contains(r.flow_points[p]);
+      }
+      if (in_box) continue;
+      ++bg;
+      bg_moving += r.flow_point_moving[p];
+    }
+  }
+  const double box_rate = boxes ? double(dyn_boxes) / boxes : 0,
+               bg_static = bg ? 1.0 - double(bg_moving) / bg : 0;
+  std::printf(
+      "[vtest] person boxes %d, dynamic %.3f; background points %d, static %.3f; control boxes %d, "
+      "dynamic %d; filter ms median %.2f\n",
+      boxes, box_rate, bg, bg_static, still_boxes, still_dynamic, summarize(ms).median);
+  // Measured: 229 boxes, 99.6 % dynamic; 99.2 % of 2911 background points static; control 0 of 24.
+  EXPECT_GT(boxes, 100);
+  EXPECT_GE(box_rate, 0.8);
+  EXPECT_GE(bg_static, 0.95);
+  EXPECT_GE(still_boxes, 10);
+  EXPECT_LE(still_dynamic, still_boxes / 10);
+}
+
+}  // namespace
+}  // namespace sp::dyn

@@ -35,6 +35,7 @@ MotionCheckConfig MotionCheckConfig::from_yaml(const ConfigReader& r) {
   r.read("lk_levels", c.lk_levels, 0, 6);
   r.read("max_points", c.max_points, 20, 5000);
   r.read("grid_cell_px", c.grid_cell_px, 4, 200);
+  r.read("box_points", c.box_points, 0, 500);
   r.read("fb_max_px", c.fb_max_px, 0.1, 10.0);
   r.read("epsilon_epipolar_px", c.epsilon_epipolar_px, 0.1, 20.0);
   r.read("epsilon_reprojection_px", c.epsilon_reprojection_px, 0.1, 50.0);

@@ -40,33 +40,53 @@ bool inside(const cv::Rect2f& r, const cv::Point2f& p) {
   return p.x >= r.x && p.y >= r.y && p.x < r.x + r.width && p.y < r.y + r.height;
 }
 
-// Points to track: the strongest keypoint per grid cell (spread over the image), or corners.
+// Indices of the strongest keypoint per cell of `roi` (cells of `cell` px), at most `max_points`.
+std::vector<int> bucket(const std::vector<cv::KeyPoint>& kps, const cv::Rect2f& roi, int cell,
+                        int max_points) {
+  const int gw = std::max(1, static_cast<int>(std::ceil(roi.width / cell)));
+  const int gh = std::max(1, static_cast<int>(std::ceil(roi.height / cell)));
+  std::vector<int> best(static_cast<std::size_t>(gw * gh), -1);
+  const auto resp = [&](int i) { return kps[static_cast<std::size_t>(i)].response; };
+  for (int i = 0; i < static_cast<int>(kps.size()); ++i) {
+    const cv::Point2f& p = kps[static_cast<std::size_t>(i)].pt;
+    if (!roi.contains(p)) continue;
+    const int gx = std::clamp(static_cast<int>((p.x - roi.x) / static_cast<float>(cell)), 0, gw - 1);
+    const int gy = std::clamp(static_cast<int>((p.y - roi.y) / static_cast<float>(cell)), 0, gh - 1);
+    int& b = best[static_cast<std::size_t>(gy * gw + gx)];
+    if (b < 0 || resp(i) > resp(b)) b = i;
+  }
+  std::vector<int> chosen;
+  for (int b : best) {
+    if (b >= 0) chosen.push_back(b);
+  }
+  if (static_cast<int>(chosen.size()) > max_points) {
+    std::nth_element(chosen.begin(), chosen.begin() + max_points, chosen.end(),
+                     [&](int a, int b) { return resp(a) > resp(b); });
+    chosen.resize(static_cast<std::size_t>(max_points));
+  }
+  return chosen;
+}
+
+// Points to track: keypoints spread over the image by a grid, plus a denser sample inside each
+// candidate box so every box gets enough points to be judged; corners when there are no keypoints.
 std::vector<cv::Point2f> pick_points(const cv::Mat& gray, const std::vector<cv::KeyPoint>* kps, int cell,
-                                     int max_points) {
+                                     int max_points, const std::vector<Detection>& boxes, int box_points) {
   std::vector<cv::Point2f> pts;
+  const cv::Rect2f image(0.f, 0.f, static_cast<float>(gray.cols), static_cast<float>(gray.rows));
   if (kps != nullptr && static_cast<int>(kps->size()) >= 20) {
-    const int gw = (gray.cols + cell - 1) / cell, gh = (gray.rows + cell - 1) / cell;
-    std::vector<int> best(static_cast<std::size_t>(gw * gh), -1);
-    for (int i = 0; i < static_cast<int>(kps->size()); ++i) {
-      const cv::Point2f& p = (*kps)[static_cast<std::size_t>(i)].pt;
-      const int gx = std::clamp(static_cast<int>(p.x) / cell, 0, gw - 1);
-      const int gy = std::clamp(static_cast<int>(p.y) / cell, 0, gh - 1);
-      int& b = best[static_cast<std::size_t>(gy * gw + gx)];
-      if (b < 0 ||
-          (*kps)[static_cast<std::size_t>(i)].response > (*kps)[static_cast<std::size_t>(b)].response)
-        b = i;
+    std::vector<int> chosen = bucket(*kps, image, cell, max_points);
+    std::vector<bool> taken(kps->size(), false);
+    for (int i : chosen) taken[static_cast<std::size_t>(i)] = true;
+    for (const Detection& d : boxes) {
+      const cv::Rect2f roi = d.box & image;
+      if (box_points <= 0 || roi.area() < 1.f) continue;
+      const int c = std::max(4, static_cast<int>(std::sqrt(roi.area() / static_cast<float>(box_points))));
+      for (int i : bucket(*kps, roi, c, box_points)) {
+        if (!taken[static_cast<std::size_t>(i)])
+          chosen.push_back(i), taken[static_cast<std::size_t>(i)] = true;
+      }
     }
-    std::vector<int> chosen;
-    for (int b : best) {
-      if (b >= 0) chosen.push_back(b);
-    }
-    if (static_cast<int>(chosen.size()) > max_points) {
-      std::nth_element(chosen.begin(), chosen.begin() + max_points, chosen.end(), [&](int a, int b) {
-        return (*kps)[static_cast<std::size_t>(a)].response > (*kps)[static_cast<std::size_t>(b)].response;
-      });
-      chosen.resize(static_cast<std::size_t>(max_points));
-    }
-    for (int b : chosen) pts.push_back((*kps)[static_cast<std::size_t>(b)].pt);
+    for (int i : chosen) pts.push_back((*kps)[static_cast<std::size_t>(i)].pt);
   } else {
     cv::goodFeaturesToTrack(gray, pts, max_points, 0.01, cell / 2.0);
   }
@@ -183,7 +203,10 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
     const int cell =
         std::max(cfg_.grid_cell_px,
                  static_cast<int>(std::ceil(std::sqrt(static_cast<double>(gray.total()) / cfg_.max_points))));
-    std::vector<cv::Point2f> cand = pick_points(gray, in.keypoints, cell, cfg_.max_points);
+    std::vector<cv::Point2f> cand =
+        pick_points(gray, in.keypoints, cell, cfg_.max_points,
+                    use_boxes && in.detections != nullptr ? in.detections->items : std::vector<Detection>{},
+                    cfg_.box_points);
     if (!cand.empty()) {
       const cv::Size win(cfg_.lk_window, cfg_.lk_window);
       const cv::TermCriteria term(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 20, 0.03);

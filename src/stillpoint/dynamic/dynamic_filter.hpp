@@ -28,13 +28,14 @@ struct MotionCheckConfig {
   CullMode mode = CullMode::kDetectorFlow;
   // Residual used to call a point moving: "auto" = reprojection when depth and K are given (camera
   // motion from PnP-RANSAC on the flow, predicted pose as its initial guess), else epipolar.
-  std::string residual = "auto";         // auto | epipolar | reprojection
-  int lk_window = 15;                    // px, LK window side [5, 61]
-  int lk_levels = 3;                     // pyramid levels above the base [0, 6]
-  int max_points = 300;                  // tracked points per frame (keypoints bucketed on a grid) [20, 5000]
-  int grid_cell_px = 24;                 // bucketing cell for picking tracked points [4, 200]
-  double fb_max_px = 1.0;                // forward-backward LK error above which a track is dropped [0.1, 10]
-  double epsilon_epipolar_px = 1.0;      // epipolar distance above which a point moves [0.1, 20]
+  std::string residual = "auto";     // auto | epipolar | reprojection
+  int lk_window = 15;                // px, LK window side [5, 61]
+  int lk_levels = 3;                 // pyramid levels above the base [0, 6]
+  int max_points = 300;              // tracked points per frame (keypoints bucketed on a grid) [20, 5000]
+  int grid_cell_px = 24;             // bucketing cell for picking tracked points [4, 200]
+  int box_points = 24;               // extra tracked points per candidate box (denser grid inside) [0, 500]
+  double fb_max_px = 1.0;            // forward-backward LK error above which a track is dropped [0.1, 10]
+  double epsilon_epipolar_px = 1.0;  // epipolar distance above which a point moves [0.1, 20]
   double epsilon_reprojection_px = 2.0;  // reprojection residual above which a point moves [0.1, 50]
   double ransac_threshold_px = 1.0;      // F-matrix / PnP RANSAC inlier threshold [0.1, 20]
   double ransac_confidence = 0.99;       // [0.5, 0.9999]
