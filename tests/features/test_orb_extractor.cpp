@@ -79,6 +79,9 @@ TEST(OrbExtractor, ConfigFromYamlChecksRanges) {
   EXPECT_EQ(ok.fast_threshold, 20);
   EXPECT_THROW(OrbConfig::from_yaml(ConfigReader::from_string("scale_factor: 0.9\n", "t")), ConfigError);
   EXPECT_THROW(OrbConfig::from_yaml(ConfigReader::from_string("fast_threshold: 5\n", "t")), ConfigError);
+  EXPECT_THROW(OrbConfig::from_yaml(ConfigReader::from_string("pattern: learned\n", "t")), ConfigError);
+  EXPECT_EQ(OrbConfig::from_yaml(ConfigReader::from_string("pattern: decorrelated\n", "t")).pattern,
+            "decorrelated");
   OrbConfig bad;
   bad.n_levels = 0;
   EXPECT_THROW(OrbExtractor{bad}, sp::Error);

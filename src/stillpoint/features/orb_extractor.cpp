@@ -26,6 +26,7 @@ OrbConfig OrbConfig::from_yaml(const sp::ConfigReader& r) {
   r.read("fast_threshold", c.fast_threshold, 1, 254);
   r.read("fast_min_threshold", c.fast_min_threshold, 1, 254);
   r.read("parallel_levels", c.parallel_levels);
+  r.read_choice("pattern", c.pattern, {"gaussian", "decorrelated"});
   if (c.fast_min_threshold > c.fast_threshold) {
     r.fail("fast_min_threshold", "must not exceed fast_threshold (" + std::to_string(c.fast_threshold) + ")");
   }
@@ -41,6 +42,7 @@ void OrbConfig::validate() const {
   if (fast_min_threshold < 1 || fast_min_threshold > fast_threshold) {
     bad("fast_min_threshold must be in [1, fast_threshold]");
   }
+  if (pattern != "gaussian" && pattern != "decorrelated") bad("pattern must be gaussian or decorrelated");
 }
 
 namespace {
@@ -115,7 +117,9 @@ void steered_brief(const std::uint8_t* c, int step, float angle_deg, const float
 
 }  // namespace
 
-OrbExtractor::OrbExtractor(const OrbConfig& config) : OrbExtractor(config, OrbPattern::standard()) {}
+OrbExtractor::OrbExtractor(const OrbConfig& config)
+    : OrbExtractor(config,
+                   config.pattern == "decorrelated" ? OrbPattern::decorrelated() : OrbPattern::generate()) {}
 
 OrbExtractor::OrbExtractor(const OrbConfig& config, const OrbPattern& pattern)
     : config_(config), pattern_(pattern) {

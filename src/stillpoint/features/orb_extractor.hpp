@@ -4,6 +4,7 @@
 // orientation and steered 256-bit BRIEF descriptors on a blurred level image.
 #include <array>
 #include <opencv2/core.hpp>
+#include <string>
 #include <vector>
 
 #include "stillpoint/common/config_reader.hpp"
@@ -20,6 +21,9 @@ struct OrbConfig {
   int fast_min_threshold = 7;  // FAST threshold used in cells where the first finds nothing [grey levels]
   // Extract pyramid levels concurrently with cv::parallel_for_; output is identical either way.
   bool parallel_levels = false;
+  // Descriptor sampling pattern: "gaussian" (OrbPattern::generate(), what data/vocab was trained
+  // on) or "decorrelated" (OrbPattern::decorrelated(); needs a vocabulary trained on it).
+  std::string pattern = "gaussian";
 
   static OrbConfig from_yaml(const sp::ConfigReader& r);
   // Throws sp::Error when a value is out of range (for configs built in code).
@@ -35,7 +39,7 @@ class OrbExtractor {
   static constexpr int kCellSize = 30;   // FAST detection cell size [px]
 
   explicit OrbExtractor(const OrbConfig& config);
-  // With another sampling pattern (for experiments; descriptors then differ from the default).
+  // With an explicit sampling pattern (config.pattern is then ignored).
   OrbExtractor(const OrbConfig& config, const OrbPattern& pattern);
 
   // gray: CV_8UC1 image. mask (optional): CV_8UC1 of the same size, 0 = do not detect there.

@@ -33,7 +33,7 @@ int gaussian_int(SplitMix64& rng, int sigma_num, int sigma_den) {
 
 }  // namespace
 
-OrbPattern OrbPattern::standard() {
+OrbPattern OrbPattern::decorrelated() {
   // Produced by tests/features/tools/learn_pattern from frames 1, 16, ..., 136 (1-based, sorted) of
   // both dynsynth *_150 sequences: 256 of the 16384 tests of generate(kDefaultSeed + k), k < 64,
   // chosen for low bias and low mutual correlation on steered keypoint patches (as rBRIEF). On

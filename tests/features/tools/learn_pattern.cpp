@@ -1,8 +1,8 @@
-// Learns the standard ORB sampling pattern (rBRIEF-style): from a pool of candidate tests drawn by
+// Learns the decorrelated ORB sampling pattern (rBRIEF-style): from a pool of candidate tests drawn by
 // OrbPattern::generate with seeds kDefaultSeed + k, keep 256 tests with the least bias and low
 // mutual correlation on steered keypoint patches of the given frames. Prints a C++ table for
-// orb_pattern.cpp.  Usage: learn_pattern <frames...>   (we used every 15th frame of both
-// dynsynth/*_150 sequences in sorted order: see the comment in orb_pattern.cpp)
+// OrbPattern::decorrelated() in orb_pattern.cpp.  Usage: learn_pattern <frames...>   (we used every 15th
+// frame of both dynsynth/*_150 sequences in sorted order: see the comment in orb_pattern.cpp)
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
