@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cstdio>
+#include <ctime>
 #include <filesystem>
 #include <fstream>
 #include <functional>
@@ -182,6 +183,52 @@ TEST(DynSynth, Explore) {
   run_sequence(CullMode::kDetectorOnly, Boxes::kOracle, 30);
   run_sequence(CullMode::kFlowOnly, Boxes::kNone, 30,
                [](MotionCheckConfig& c) { c.epsilon_reprojection_px = 3; });
+}
+
+// Not a check: prints the motion check's cost (SP_DYN_TIMING=1). cv::setNumThreads(1) keeps all work
+// in this thread, so its CPU time is not inflated by other jobs sharing the 2 cores (wall time is).
+TEST(DynSynth, TimingReport) {
+  if (!getenv("SP_DYN_TIMING") || !fs::exists(kSeq)) GTEST_SKIP();
+  const int threads = cv::getNumThreads();
+  cv::setNumThreads(1);
+  const auto frames = read_associations(kSeq);
+  const auto oracle = OracleDetections::load(kSeq / "boxes.txt");
+  DynamicFeatureFilter filter{MotionCheckConfig{}};
+  auto orb = cv::ORB::create(1000);
+  Eigen::Matrix3d K;
+  K << 535.4, 0, 320.1, 0, 539.2, 247.6, 0, 0, 1;
+  cv::Mat prev;
+  std::vector<double> cpu, wall;
+  for (std::size_t i = 40; i < frames.size(); ++i) {
+    cv::Mat gray = cv::imread((kSeq / frames[i].rgb).string(), cv::IMREAD_GRAYSCALE), depth;
+    cv::imread((kSeq / frames[i].depth).string(), cv::IMREAD_UNCHANGED).convertTo(depth, CV_32F, 1.0 / 5000);
+    std::vector<cv::KeyPoint> kps;
+    orb->detect(gray, kps);
+    const Detections det = oracle.at(frames[i].stamp, i);
+    DynamicInput in;
+    in.frame_index = i;
+    in.prev_gray = prev.empty() ? nullptr : &prev;
+    in.gray = &gray;
+    in.depth = &depth;
+    in.keypoints = &kps;
+    in.detections = &det;
+    in.K = K;
+    timespec a{}, b{};
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &a);
+    const DynamicResult r = filter.process(in);
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &b);
+    if (!prev.empty()) {
+      cpu.push_back((b.tv_sec - a.tv_sec) * 1e3 + (b.tv_nsec - a.tv_nsec) * 1e-6);
+      wall.push_back(r.ms);
+    }
+    prev = gray;
+  }
+  cv::setNumThreads(threads);
+  const auto c = summarize(cpu), w = summarize(wall);
+  std::printf(
+      "[timing] motion check 640x480, %zu frames, 1 OpenCV thread: CPU median %.2f p95 %.2f ms; wall median "
+      "%.2f ms\n",
+      c.count, c.median, c.p95, w.median);
 }
 
 TEST(DynSynth, FlowOnly) {
