@@ -6,6 +6,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "stillpoint/common/error.hpp"
+#include "stillpoint/dynamic/dynamic_filter.hpp"
 #include "stillpoint/dynamic/yolo_detector.hpp"
 
 namespace sp::dyn {
@@ -104,6 +105,41 @@ TEST(YoloDetector, ConfigFromModelPathAndYaml) {
                ConfigError);
   EXPECT_THROW(DetectorConfig::from_yaml(ConfigReader::from_string("dynamic_classes: [ghost]\n", "t.yaml")),
                ConfigError);
+}
+
+}  // namespace
+}  // namespace sp::dyn
+
+namespace sp::dyn {
+namespace {
+
+TEST(DetectorConfigFiles, ShippedExamplesParse) {
+  const std::filesystem::path dir = SP_SOURCE_DIR "/config/dynamic";
+  for (const char* f :
+       {"yolox_nano.yaml", "yolo-fastest-1.1.yaml", "yolo-fastest-1.1_body.yaml", "yolov7-tiny.yaml"}) {
+    const auto r = ConfigReader::from_file(dir / f);
+    const DetectorConfig c = DetectorConfig::from_yaml(r);
+    r.finish();
+    EXPECT_FALSE(c.model.empty()) << f;
+  }
+  const auto r = ConfigReader::from_file(dir / "motion_check.yaml");
+  const MotionCheckConfig m = MotionCheckConfig::from_yaml(r);
+  r.finish();
+  const MotionCheckConfig d;
+  EXPECT_EQ(m.lk_window, d.lk_window);  // the file lists the defaults
+  EXPECT_EQ(m.max_points, d.max_points);
+  EXPECT_DOUBLE_EQ(m.background_depth_margin_m, d.background_depth_margin_m);
+  EXPECT_EQ(m.box_points, d.box_points);
+}
+
+TEST(DetectorConfigFiles, ShippedYoloxConfigFindsThePerson) {
+  const std::filesystem::path f = SP_SOURCE_DIR "/config/dynamic/yolox_nano.yaml";
+  const DetectorConfig c = DetectorConfig::from_yaml(ConfigReader::from_file(f));
+  if (!std::filesystem::exists(c.model)) GTEST_SKIP() << "no " << c.model;
+  YoloDetector det(c);
+  const cv::Mat img = cv::imread((kPeople / "darknet_person.jpg").string());
+  ASSERT_FALSE(img.empty());
+  EXPECT_EQ(det.detect(img).items.size(), 1u);
 }
 
 }  // namespace

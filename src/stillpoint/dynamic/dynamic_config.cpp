@@ -4,10 +4,11 @@
 namespace sp::dyn {
 
 CullMode parse_cull_mode(const std::string& s) {
+  // The CLI spellings (flow, detector, detector+flow) are accepted too.
   if (s == "off") return CullMode::kOff;
-  if (s == "detector_only") return CullMode::kDetectorOnly;
-  if (s == "flow_only") return CullMode::kFlowOnly;
-  if (s == "detector_flow") return CullMode::kDetectorFlow;
+  if (s == "detector_only" || s == "detector") return CullMode::kDetectorOnly;
+  if (s == "flow_only" || s == "flow") return CullMode::kFlowOnly;
+  if (s == "detector_flow" || s == "detector+flow") return CullMode::kDetectorFlow;
   throw Error("unknown dynamic culling mode '" + s + "' (off | detector_only | flow_only | detector_flow)");
 }
 
@@ -28,7 +29,8 @@ const char* to_string(CullMode m) {
 MotionCheckConfig MotionCheckConfig::from_yaml(const ConfigReader& r) {
   MotionCheckConfig c;
   std::string mode = to_string(c.mode);
-  r.read_choice("mode", mode, {"off", "detector_only", "flow_only", "detector_flow"});
+  r.read_choice("mode", mode,
+                {"off", "detector_only", "flow_only", "detector_flow", "detector", "flow", "detector+flow"});
   c.mode = parse_cull_mode(mode);
   r.read_choice("residual", c.residual, {"auto", "epipolar", "reprojection"});
   r.read("lk_window", c.lk_window, 5, 61);

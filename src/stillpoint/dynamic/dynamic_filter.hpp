@@ -21,7 +21,8 @@ enum class CullMode {
   kFlowOnly,      // no boxes: clusters of moving points are culled (ablation)
   kDetectorFlow,  // boxes culled only when the motion check says they move (the method)
 };
-CullMode parse_cull_mode(const std::string& s);  // off | detector_only | flow_only | detector_flow
+// off | detector_only | flow_only | detector_flow (also: detector | flow | detector+flow); throws sp::Error.
+CullMode parse_cull_mode(const std::string& s);
 const char* to_string(CullMode m);
 
 struct MotionCheckConfig {
