@@ -11,13 +11,13 @@ SP=${BUILD}/apps/stillpoint/stillpoint
 D=../shared/tools/dynsynth/dynsynth.py
 VPR=../shared/data/vpr
 PY=/usr/bin/python3
-THREADS=${THREADS:-2}
-EPOCHS=${EPOCHS:-6}
-QPE=${QPE:-192}
-TRAIN_SEEDS="101 102 103 104 105 106 107 108 109 110 111 112"   # training rooms
+THREADS=${THREADS:-1}
+EPOCHS=${EPOCHS:-8}
+QPE=${QPE:-96}
+TRAIN_SEEDS="101 102 103 104"   # training rooms
 EVAL_SEEDS="901 902 903"                                           # held back: never trained on
 COMMON=(--epochs "$EPOCHS" --queries-per-epoch "$QPE" --lr 1e-3 --margin 0.1 --negatives 5 --seed 1
-        --threads "$THREADS" --variant small --no-progress)
+        --threads "$THREADS" --variant small --refresh-every 96 --negative-pool 200 --kmeans-images 100 --no-progress)
 
 mkdir -p "$WORK/train" "$WORK/eval" "$WORK/models" "$WORK/results"
 # 1. Data: 400 views per room at 320x240; every other training room and all eval rooms with people.

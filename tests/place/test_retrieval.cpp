@@ -131,6 +131,7 @@ TEST(PlaceRetrieval, BowPrefersTheSameSceneAndRoundTrips) {
   const float other = BowVocabulary::score(voc.transform(db), voc.transform(da2));
   EXPECT_GT(same, other);
   EXPECT_NEAR(BowVocabulary::score(voc.transform(da), voc.transform(da)), 1.0f, 1e-5f);
+  EXPECT_EQ(BowVocabulary::score(voc.transform(da), voc.transform(cv::Mat())), 0.0f);
   const fs::path file = fs::path(SP_TEST_TMP_DIR) / "place" / "voc.bin";
   fs::create_directories(file.parent_path());
   voc.save(file);

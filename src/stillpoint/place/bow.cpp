@@ -128,6 +128,9 @@ Eigen::VectorXf BowVocabulary::transform(const cv::Mat& d) const {
 }
 
 float BowVocabulary::score(const Eigen::VectorXf& a, const Eigen::VectorXf& b) {
+  // An image without features matches nothing (as in DBoW2); without this it would score 0.5 against
+  // everything and outrank real matches, whose vectors overlap only partly.
+  if (a.isZero() || b.isZero()) return 0.0f;
   return 1.0f - 0.5f * (a - b).lpNorm<1>();
 }
 
