@@ -55,6 +55,9 @@ struct RunArgs {
   bool deterministic = false;
   bool no_progress = false;
   std::size_t max_frames = 0;
+  std::string dynamic;
+  std::string detector_model;
+  std::string keyframe_policy;
 };
 
 std::filesystem::path default_dataset() {
@@ -71,7 +74,10 @@ int run(const RunArgs& args) {
     spdlog::info("no --dataset given: running the bundled demo sequence {}", dataset.string());
   const std::filesystem::path config_file =
       args.config.empty() ? default_config() : std::filesystem::path(args.config);
-  const pipeline::SystemConfig config = pipeline::SystemConfig::load(config_file);
+  pipeline::SystemConfig config = pipeline::SystemConfig::load(config_file);
+  if (!args.dynamic.empty()) config.dynamic.mode = args.dynamic;
+  if (!args.detector_model.empty()) config.dynamic.model = args.detector_model;
+  if (!args.keyframe_policy.empty()) config.tracker.keyframes.policy = args.keyframe_policy;
   InterruptWatcher interrupt;  // before any thread starts, so all threads inherit the blocked mask
   io::TumSequenceOptions seq_options;
   if (!args.camera.empty()) seq_options.camera_file = args.camera;
@@ -83,6 +89,8 @@ int run(const RunArgs& args) {
   options.deterministic = args.deterministic;
   options.progress = !args.no_progress;
   options.groundtruth = sequence.groundtruth_path();
+  options.boxes_file = dataset / "boxes.txt";
+  options.masks_dir = dataset / "masks";
   options.stop = &interrupt.flag();
   options.label = dataset.filename().string();
   options.extra_stats["dataset"] = dataset.string();
@@ -122,6 +130,12 @@ void add_run_command(CLI::App& app) {
                 "Fixed seeds, stages in lock-step: identical output twice");
   cmd->add_option("--max-frames", args->max_frames, "Stop after this many frames (0 = all)");
   cmd->add_flag("--no-progress", args->no_progress, "No progress bar");
+  cmd->add_option("--dynamic", args->dynamic, "Dynamic culling: off|flow|detector|detector+flow|oracle|auto")
+      ->check(CLI::IsMember({"off", "flow", "detector", "detector+flow", "oracle", "auto"}));
+  cmd->add_option("--detector-model", args->detector_model,
+                  "YOLO model (.onnx, or Darknet .cfg with .weights)");
+  cmd->add_option("--keyframe-policy", args->keyframe_policy, "heuristic|adaptive")
+      ->check(CLI::IsMember({"heuristic", "adaptive"}));
   cmd->callback([args] {
     const int code = run(*args);
     if (code != 0) throw CLI::RuntimeError(code);

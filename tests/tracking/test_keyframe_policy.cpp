@@ -69,18 +69,19 @@ TEST(ViewingAngle, MatchesKnownRotationAboutThePoint) {
   for (double deg : {0.5, 25.0, 30.0, 35.0, 120.0}) {
     const Eigen::AngleAxisd rot(deg * M_PI / 180.0, Eigen::Vector3d(0.2, 1.0, 0.1).normalized());
     // Rotating the camera centre about the point changes the ray's direction by exactly `deg`.
-    const Eigen::Vector3d c_now = p + rot * (c_ref - p) * 1.7;  // and the distance changes, which must not matter
+    const Eigen::Vector3d c_now =
+        p + rot * (c_ref - p) * 1.7;  // and the distance changes, which must not matter
     EXPECT_NEAR(viewing_angle_change_deg(p, c_ref, c_now), deg, 1e-9);
   }
 }
 
 TEST(EffectiveGrid, CountsOnlyPointsBeyondThe30DegreeRule) {
   std::vector<ViewChange> changes = {
-      {10, 10, 31.0f},   // top-left, effective
-      {630, 470, 45.0f}, // bottom-right, effective
-      {320, 240, 29.9f}, // centre, not effective
-      {320, 240, 30.0f}, // exactly 30 is not "more than 30"
-      {639, 0, 90.0f},   // top-right, effective
+      {10, 10, 31.0f},    // top-left, effective
+      {630, 470, 45.0f},  // bottom-right, effective
+      {320, 240, 29.9f},  // centre, not effective
+      {320, 240, 30.0f},  // exactly 30 is not "more than 30"
+      {639, 0, 90.0f},    // top-right, effective
   };
   const Eigen::Matrix3i g = effective_point_grid(changes, 640, 480, 30.0);
   EXPECT_EQ(g.sum(), 3);
@@ -107,7 +108,7 @@ TEST(HeuristicPolicy, InsertsWhenLosingTheReference) {
   auto policy = make_keyframe_policy(cfg);
   KeyframeCandidate c = healthy_candidate();
   EXPECT_FALSE(policy->decide(c));  // tracking well: no keyframe
-  c.tracked_inliers = 200;           // < 0.75 * 350
+  c.tracked_inliers = 200;          // < 0.75 * 350
   EXPECT_TRUE(policy->decide(c));
   c.mapping_idle = false;
   c.mapping_queue = 3;  // local mapping swamped
@@ -127,7 +128,7 @@ TEST(AdaptivePolicy, NeedsManySpreadEffectivePoints) {
   for (int i = 0; i < 40; ++i) c.view_changes.push_back({20.0f, 20.0f, 40.0f});
   for (int i = 0; i < 40; ++i) c.view_changes.push_back({620.0f, 460.0f, 40.0f});
   EXPECT_TRUE(policy->decide(c));  // 80 effective points in opposite corners
-  c.view_changes.resize(60);        // 40 + 20: below the adaptive threshold of 75
+  c.view_changes.resize(60);       // 40 + 20: below the adaptive threshold of 75
   EXPECT_FALSE(policy->decide(c));
 }
 

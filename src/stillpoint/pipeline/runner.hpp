@@ -17,9 +17,11 @@ struct RunOptions {
   bool deterministic = false;
   bool progress = true;
   std::optional<std::filesystem::path> groundtruth;
-  const std::atomic<bool>* stop = nullptr;  // set asynchronously (SIGINT) to end the run early
-  std::string label;                        // shown in the progress bar
-  nlohmann::json extra_stats;               // merged into stats.json (mode switches etc.)
+  std::optional<std::filesystem::path> boxes_file;  // for oracle culling
+  std::optional<std::filesystem::path> masks_dir;   // for scoring culling
+  const std::atomic<bool>* stop = nullptr;          // set asynchronously (SIGINT) to end the run early
+  std::string label;                                // shown in the progress bar
+  nlohmann::json extra_stats;                       // merged into stats.json (mode switches etc.)
 };
 
 struct RunResult {

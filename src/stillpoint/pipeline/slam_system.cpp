@@ -15,15 +15,18 @@ track::DepthModel with_camera_range(track::DepthModel d, const io::CameraConfig&
 }
 }  // namespace
 
-SlamSystem::SlamSystem(SystemConfig config, io::CameraConfig camera, bool deterministic)
+SlamSystem::SlamSystem(SystemConfig config, io::CameraConfig camera, const SystemOptions& options)
     : config_(std::move(config)),
       camera_(std::move(camera)),
-      deterministic_(deterministic),
+      deterministic_(options.deterministic),
       frontend_(config_.orb, camera_.intrinsics, with_camera_range(config_.depth, camera_)),
+      culling_(config_.dynamic, camera_.intrinsics, options.deterministic, options.boxes_file),
       tracker_(map_, config_.tracker, camera_.intrinsics, with_camera_range(config_.depth, camera_),
                frontend_.pyramid(), camera_.fps),
       mapper_(map_, config_.mapping, camera_.intrinsics, with_camera_range(config_.depth, camera_),
               frontend_.pyramid()) {
+  if (options.masks_dir && std::filesystem::is_directory(*options.masks_dir))
+    culling_score_.emplace(*options.masks_dir);
   mapping_stage_ =
       std::make_unique<LocalMappingStage>(mapper_, times_, nullptr, config_.pipeline.mapping_queue);
   if (!deterministic_) mapping_stage_->start();
@@ -35,10 +38,20 @@ bool SlamSystem::failed() const { return mapping_stage_->failed(); }
 
 FrameReport SlamSystem::process(const io::FrameData& data) {
   Stopwatch frame_watch;
+  culling_.submit(data);  // detection overlaps feature extraction
   Stopwatch watch;
   ExtractedFeatures features = frontend_.extract(data);
   times_.add("extract", watch.elapsed_ms());
-  std::vector<bool> dynamic;  // filled by the dynamic-culling stage
+  std::vector<bool> dynamic;
+  if (culling_.enabled()) {
+    watch.restart();
+    CullingOutput culled =
+        culling_.process(data, features.gray, features.keypoints, tracker_.predicted_motion());
+    times_.add("dynamic", watch.elapsed_ms());
+    if (culled.detection_used && culled.detector_ms > 0) times_.add("detector", culled.detector_ms);
+    dynamic = std::move(culled.drop);
+  }
+  if (culling_score_) culling_score_->add(data.rgb_path, features.keypoints, dynamic);
   track::Frame frame = frontend_.assemble(data, std::move(features), dynamic);
   culled_total_ += frame.culled;
 
@@ -88,7 +101,9 @@ nlohmann::json SlamSystem::statistics() {
   j["relocalizations"] = tracker_.relocalizations();
   j["keyframes_created"] = keyframes_created_;
   j["keyframe_policy"] = tracker_.policy().name();
+  j["dynamic_mode"] = culling_.mode();
   j["culled_features_total"] = culled_total_;
+  if (culling_score_) j["culling_score"] = culling_score_->to_json();
   j["culled_features_per_frame"] =
       frames_ > 0 ? static_cast<double>(culled_total_) / static_cast<double>(frames_) : 0.0;
   {

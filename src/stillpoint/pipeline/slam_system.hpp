@@ -11,6 +11,8 @@
 #include "stillpoint/io/frame.hpp"
 #include "stillpoint/io/trajectory_io.hpp"
 #include "stillpoint/map/map.hpp"
+#include "stillpoint/pipeline/culling_score.hpp"
+#include "stillpoint/pipeline/dynamic_culling.hpp"
 #include "stillpoint/pipeline/frontend.hpp"
 #include "stillpoint/pipeline/local_mapping_stage.hpp"
 #include "stillpoint/pipeline/system_config.hpp"
@@ -25,9 +27,15 @@ struct FrameReport {
   bool keyframe = false;
 };
 
+struct SystemOptions {
+  bool deterministic = false;
+  std::optional<std::filesystem::path> boxes_file;  // oracle detections (dynsynth boxes.txt)
+  std::optional<std::filesystem::path> masks_dir;   // score culling against ground-truth masks
+};
+
 class SlamSystem {
  public:
-  SlamSystem(SystemConfig config, io::CameraConfig camera, bool deterministic);
+  SlamSystem(SystemConfig config, io::CameraConfig camera, const SystemOptions& options);
   ~SlamSystem();
   SlamSystem(const SlamSystem&) = delete;
   SlamSystem& operator=(const SlamSystem&) = delete;
@@ -49,6 +57,8 @@ class SlamSystem {
   StageTimes times_;
   map::Map map_;
   FrontEnd frontend_;
+  DynamicCulling culling_;
+  std::optional<CullingScore> culling_score_;
   track::Tracker tracker_;
   mapping::LocalMapper mapper_;
   std::unique_ptr<LocalMappingStage> mapping_stage_;

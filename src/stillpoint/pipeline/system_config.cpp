@@ -25,6 +25,7 @@ SystemConfig SystemConfig::from_yaml(const ConfigReader& r) {
   c.depth = depth_model_from_yaml(r.section("depth"));
   c.tracker = track::TrackerConfig::from_yaml(r.section("tracking"));
   c.mapping = mapping::LocalMappingConfig::from_yaml(r.section("local_mapping"));
+  c.dynamic = DynamicConfig::from_yaml(r.section("dynamic"));
   c.pipeline = PipelineConfig::from_yaml(r.section("pipeline"));
   return c;
 }

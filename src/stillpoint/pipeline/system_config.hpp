@@ -7,6 +7,7 @@
 #include "stillpoint/common/config_reader.hpp"
 #include "stillpoint/features/orb_extractor.hpp"
 #include "stillpoint/mapping/local_mapper.hpp"
+#include "stillpoint/pipeline/dynamic_culling.hpp"
 #include "stillpoint/tracking/frame.hpp"
 #include "stillpoint/tracking/tracker.hpp"
 
@@ -23,6 +24,7 @@ struct SystemConfig {
   track::DepthModel depth;
   track::TrackerConfig tracker;
   mapping::LocalMappingConfig mapping;
+  DynamicConfig dynamic;
   PipelineConfig pipeline;
 
   static SystemConfig from_yaml(const ConfigReader& r);

@@ -1,5 +1,6 @@
 #include "stillpoint/tracking/keyframe_policy.hpp"
 
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
 

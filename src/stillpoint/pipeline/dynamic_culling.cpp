@@ -1,0 +1,107 @@
+#include "stillpoint/pipeline/dynamic_culling.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include "stillpoint/common/error.hpp"
+
+namespace sp::pipeline {
+
+DynamicConfig DynamicConfig::from_yaml(const ConfigReader& r) {
+  DynamicConfig c;
+  r.read_choice("mode", c.mode, {"auto", "off", "flow", "detector", "detector+flow", "oracle"});
+  r.read("model", c.model);
+  r.read("detector_budget_ms", c.detector_budget_ms, 0.0, 1000.0);
+  if (r.has("detector")) {
+    c.detector = dyn::DetectorConfig::from_yaml(r.section("detector"));
+    c.detector_configured = true;
+  }
+  c.motion = dyn::MotionCheckConfig::from_yaml(r.section("motion"));
+  return c;
+}
+
+std::string DynamicConfig::resolved_mode() const {
+  if (mode != "auto") return mode;
+  return model.empty() ? "flow" : "detector+flow";
+}
+
+namespace {
+dyn::CullMode cull_mode_for(const std::string& mode) {
+  if (mode == "flow") return dyn::CullMode::kFlowOnly;
+  if (mode == "detector" || mode == "oracle") return dyn::CullMode::kDetectorOnly;
+  if (mode == "detector+flow") return dyn::CullMode::kDetectorFlow;
+  return dyn::CullMode::kOff;
+}
+}  // namespace
+
+DynamicCulling::DynamicCulling(const DynamicConfig& config, const geo::CameraIntrinsics& camera,
+                               bool deterministic, const std::optional<std::filesystem::path>& boxes_file)
+    : mode_(config.resolved_mode()), budget_ms_(config.detector_budget_ms) {
+  K_ << camera.fx, 0, camera.cx, 0, camera.fy, camera.cy, 0, 0, 1;
+  if (mode_ == "off") return;
+  if (mode_ == "detector" || mode_ == "detector+flow") {
+    if (config.model.empty())
+      throw Error("dynamic mode '" + mode_ + "' needs a detector model (--detector-model)");
+    dyn::DetectorConfig dc =
+        config.detector_configured ? config.detector : dyn::DetectorConfig::for_model(config.model);
+    dc.model = config.model;
+    detector_ = std::make_unique<dyn::AsyncDetector>(
+        dc, deterministic ? dyn::AsyncDetector::Mode::kSync : dyn::AsyncDetector::Mode::kAsync);
+  }
+  if (mode_ == "oracle") {
+    if (!boxes_file || !std::filesystem::exists(*boxes_file)) {
+      throw Error("dynamic mode 'oracle' needs the sequence's boxes.txt (dynsynth sequences have one)");
+    }
+    oracle_ = dyn::OracleDetections::load(*boxes_file);
+  }
+  dyn::MotionCheckConfig motion = config.motion;
+  motion.mode = cull_mode_for(mode_);
+  filter_ = std::make_unique<dyn::DynamicFeatureFilter>(motion);
+}
+
+DynamicCulling::~DynamicCulling() {
+  if (detector_) detector_->stop();
+}
+
+void DynamicCulling::submit(const io::FrameData& data) {
+  if (detector_) detector_->submit(data.index, data.stamp, data.bgr);
+}
+
+CullingOutput DynamicCulling::process(const io::FrameData& data, const cv::Mat& gray,
+                                      const std::vector<cv::KeyPoint>& keypoints,
+                                      const std::optional<geo::SE3>& predicted_T_cur_prev) {
+  CullingOutput out;
+  if (mode_ == "off") {
+    out.drop.assign(keypoints.size(), false);
+    return out;
+  }
+  std::optional<dyn::Detections> detections;
+  if (detector_) {
+    detections = detector_->wait_for(data.index, std::chrono::milliseconds(static_cast<int>(budget_ms_)));
+  } else if (oracle_) {
+    detections = oracle_->at(data.stamp, data.index);
+  }
+  if (detections) {
+    out.detection_used = true;
+    out.detector_ms = detections->inference_ms;
+  }
+  dyn::DynamicInput in;
+  in.frame_index = data.index;
+  in.prev_gray = prev_gray_.empty() ? nullptr : &prev_gray_;
+  in.gray = &gray;
+  in.depth = data.depth.empty() ? nullptr : &data.depth;
+  in.keypoints = &keypoints;
+  in.detections = detections ? &*detections : nullptr;
+  in.K = K_;
+  if (predicted_T_cur_prev) {
+    Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+    T.linear() = predicted_T_cur_prev->rotation();
+    T.translation() = predicted_T_cur_prev->translation();
+    in.T_cur_prev_predicted = T;
+  }
+  out.result = filter_->process(in);
+  out.drop = out.result.keypoint_dynamic;
+  prev_gray_ = gray;
+  return out;
+}
+
+}  // namespace sp::pipeline

@@ -1,0 +1,66 @@
+#pragma once
+// The dynamic-culling step of the front end: hands each frame to the detector thread, takes the
+// newest detection within a time budget, and asks the motion check which features move.
+#include <filesystem>
+#include <memory>
+#include <optional>
+#include <string>
+
+#include "stillpoint/common/config_reader.hpp"
+#include "stillpoint/dynamic/async_detector.hpp"
+#include "stillpoint/dynamic/dynamic_filter.hpp"
+#include "stillpoint/dynamic/oracle_detections.hpp"
+#include "stillpoint/geometry/camera.hpp"
+#include "stillpoint/geometry/lie.hpp"
+#include "stillpoint/io/frame.hpp"
+
+namespace sp::pipeline {
+
+struct DynamicConfig {
+  // off | flow | detector | detector+flow | oracle | auto (= detector+flow with a model, else flow)
+  std::string mode = "auto";
+  std::string model;                 // detector model (.onnx or Darknet .cfg); empty = none
+  double detector_budget_ms = 15.0;  // ms tracking may wait for the current frame's detection
+  dyn::DetectorConfig detector;      // used as given when the file sets `detector`, else from the model
+  bool detector_configured = false;
+  dyn::MotionCheckConfig motion;
+  static DynamicConfig from_yaml(const ConfigReader& r);
+  // The mode actually used: resolves auto.
+  [[nodiscard]] std::string resolved_mode() const;
+};
+
+struct CullingOutput {
+  std::vector<bool> drop;  // per keypoint
+  dyn::DynamicResult result;
+  double detector_ms = 0;  // inference time of the detection used (0 when none)
+  bool detection_used = false;
+};
+
+class DynamicCulling {
+ public:
+  // `boxes_file` is the sequence's boxes.txt (needed by oracle mode).
+  DynamicCulling(const DynamicConfig& config, const geo::CameraIntrinsics& camera, bool deterministic,
+                 const std::optional<std::filesystem::path>& boxes_file);
+  ~DynamicCulling();
+  DynamicCulling(const DynamicCulling&) = delete;
+  DynamicCulling& operator=(const DynamicCulling&) = delete;
+
+  [[nodiscard]] bool enabled() const { return mode_ != "off"; }
+  [[nodiscard]] const std::string& mode() const { return mode_; }
+  // Starts detection of a frame early (right after decoding) so it overlaps feature extraction.
+  void submit(const io::FrameData& data);
+  CullingOutput process(const io::FrameData& data, const cv::Mat& gray,
+                        const std::vector<cv::KeyPoint>& keypoints,
+                        const std::optional<geo::SE3>& predicted_T_cur_prev);
+
+ private:
+  std::string mode_;
+  double budget_ms_;
+  Eigen::Matrix3d K_;
+  std::unique_ptr<dyn::AsyncDetector> detector_;
+  std::optional<dyn::OracleDetections> oracle_;
+  std::unique_ptr<dyn::DynamicFeatureFilter> filter_;
+  cv::Mat prev_gray_;
+};
+
+}  // namespace sp::pipeline
