@@ -170,21 +170,6 @@ TEST(DynSynth, YoloxWithMotionCheck) {
   EXPECT_GE(s.recall_moving(), 0.85);
 }
 
-TEST(DynSynth, Explore) {
-  if (!getenv("EXPLORE")) GTEST_SKIP();
-  run_sequence(CullMode::kDetectorFlow, Boxes::kOracle, 30,
-               [](MotionCheckConfig& c) { c.cull_unboxed_movers = false; });
-  run_sequence(CullMode::kDetectorFlow, Boxes::kOracle, 30, [](MotionCheckConfig& c) {
-    c.cull_unboxed_movers = false;
-    c.background_depth_margin_m = 0.25;
-  });
-  run_sequence(CullMode::kDetectorFlow, Boxes::kOracle, 30,
-               [](MotionCheckConfig& c) { c.background_depth_margin_m = 0.25; });
-  run_sequence(CullMode::kDetectorOnly, Boxes::kOracle, 30);
-  run_sequence(CullMode::kFlowOnly, Boxes::kNone, 30,
-               [](MotionCheckConfig& c) { c.epsilon_reprojection_px = 3; });
-}
-
 // Not a check: prints the motion check's cost (SP_DYN_TIMING=1). cv::setNumThreads(1) keeps all work
 // in this thread, so its CPU time is not inflated by other jobs sharing the 2 cores (wall time is).
 TEST(DynSynth, TimingReport) {
