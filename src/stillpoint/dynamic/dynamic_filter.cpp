@@ -236,7 +236,6 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
     history_.clear();
   }
 
-  const double t_flow = sw.elapsed_ms();
   // 2. Candidate boxes, carried from the detection's frame to this one.
   if (use_boxes && in.detections != nullptr) res.boxes = carry_boxes(*in.detections, in.frame_index);
   const auto margin = static_cast<float>(cfg_.box_margin_px);
@@ -269,7 +268,6 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
     for (std::size_t i = 0; i < n; ++i) moving[i] = res.flow_residual[i] > eps[i];
   }
   res.flow_point_moving = moving;
-  const double t_res = sw.elapsed_ms();
 
   // 4. Which boxes move.
   res.box_dynamic.assign(res.boxes.size(), false);
@@ -348,7 +346,7 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
     }
   }
 
-  // 6. Keypoints: inside a dynamic box (unless clearly behind the object), or nearest to a mover.
+  // 6. Keypoints: inside a dynamic box (unless depth-separated from the object), or nearest to a mover.
   const auto bg_margin = static_cast<float>(cfg_.background_depth_margin_m);
   const auto nearest_flow = [&](const cv::Point2f& p) {
     int nearest = -1;
@@ -379,7 +377,6 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
     res.culled += dyn ? 1 : 0;
   }
   res.ms = sw.elapsed_ms();
-  fprintf(stderr, "T flow %.2f res %.2f total %.2f n %zu kp %zu\n", t_flow, t_res, res.ms, n, n_kp);
   return res;
 }
 
