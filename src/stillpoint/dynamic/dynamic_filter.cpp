@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <opencv2/imgproc.hpp>
 #include <opencv2/video/tracking.hpp>
@@ -149,6 +150,8 @@ DynamicFeatureFilter::DynamicFeatureFilter(const MotionCheckConfig& cfg,
 void DynamicFeatureFilter::reset() {
   history_.clear();
   memory_.clear();
+  cached_gray_.release();
+  cached_pyr_.clear();
 }
 
 std::vector<Detection> DynamicFeatureFilter::carry_boxes(const Detections& d, std::size_t to_frame) const {
@@ -211,8 +214,18 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
       const cv::Size win(cfg_.lk_window, cfg_.lk_window);
       const cv::TermCriteria term(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 20, 0.03);
       std::vector<cv::Mat> pyr_cur, pyr_prev;
-      cv::buildOpticalFlowPyramid(gray, pyr_cur, win, cfg_.lk_levels);
-      cv::buildOpticalFlowPyramid(*in.prev_gray, pyr_prev, win, cfg_.lk_levels);
+      // No reuse of the input buffer: the pyramid is cached past this call.
+      cv::buildOpticalFlowPyramid(gray, pyr_cur, win, cfg_.lk_levels, true, cv::BORDER_REFLECT_101,
+                                  cv::BORDER_CONSTANT, false);
+      // The previous frame's pyramid is last call's current one when the caller passes the same image.
+      const cv::Mat& pg = *in.prev_gray;
+      const bool same = !cached_gray_.empty() && cached_gray_.size() == pg.size() && pg.isContinuous() &&
+                        std::memcmp(cached_gray_.data, pg.data, pg.total()) == 0;
+      if (same) {
+        pyr_prev = std::move(cached_pyr_);
+      } else {
+        cv::buildOpticalFlowPyramid(pg, pyr_prev, win, cfg_.lk_levels);
+      }
       std::vector<cv::Point2f> back, fwd;
       std::vector<uchar> st1, st2;
       std::vector<float> err;
@@ -220,6 +233,8 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
       fwd = cand;
       cv::calcOpticalFlowPyrLK(pyr_prev, pyr_cur, back, fwd, st2, err, win, cfg_.lk_levels, term,
                                cv::OPTFLOW_USE_INITIAL_FLOW);
+      gray.copyTo(cached_gray_);
+      cached_pyr_ = pyr_cur;
       const cv::Rect2f image(0.f, 0.f, static_cast<float>(gray.cols), static_cast<float>(gray.rows));
       const auto fb2 = static_cast<float>(cfg_.fb_max_px * cfg_.fb_max_px);
       for (std::size_t i = 0; i < cand.size(); ++i) {

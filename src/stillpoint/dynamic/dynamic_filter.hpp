@@ -123,6 +123,8 @@ class DynamicFeatureFilter {
   std::vector<bool> always_dynamic_;  // class id -> always dynamic
   std::deque<FlowStep> history_;
   std::vector<Memory> memory_;
+  cv::Mat cached_gray_;  // last current image and its LK pyramid, reused as "previous"
+  std::vector<cv::Mat> cached_pyr_;
 };
 
 }  // namespace sp::dyn
