@@ -303,3 +303,41 @@ TEST(MotionCheck, ConfigAndInputErrors) {
 
 }  // namespace
 }  // namespace sp::dyn
+
+namespace sp::dyn {
+namespace {
+
+// The cached pyramid of the previous call must give the same flow as building it afresh.
+TEST(MotionCheck, CachedPyramidGivesTheSameFlow) {
+  const Scene s;
+  std::vector<Rendered> f;
+  for (int i = 0; i < 3; ++i)
+    f.push_back(test::render(s.planes({0.03 * i, 0.01 * i}), pose(0.5 * i, {0.01 * i, 0, 0})));
+  const auto kps = test::grid_keypoints(640, 480, 8);
+  const auto run = [&](DynamicFeatureFilter& filter, std::size_t i, const cv::Mat& prev, const cv::Mat& cur) {
+    DynamicInput in;
+    in.frame_index = i;
+    in.prev_gray = &prev;
+    in.gray = &cur;
+    in.keypoints = &kps;
+    return filter.process(in);
+  };
+  DynamicFeatureFilter a{MotionCheckConfig{}}, b{MotionCheckConfig{}};
+  run(a, 1, f[0].gray, f[1].gray);
+  const cv::Mat prev_copy = f[1].gray.clone();  // another buffer, same content: cache hit
+  const DynamicResult ra = run(a, 2, prev_copy, f[2].gray);
+  const DynamicResult rb = run(b, 2, f[1].gray, f[2].gray);  // fresh filter: no cache
+  ASSERT_EQ(ra.flow_points.size(), rb.flow_points.size());
+  ASSERT_GT(ra.flow_points.size(), 100u);
+  for (std::size_t i = 0; i < ra.flow_points.size(); ++i) {
+    EXPECT_FLOAT_EQ(ra.flow_prev[i].x, rb.flow_prev[i].x);
+    EXPECT_FLOAT_EQ(ra.flow_prev[i].y, rb.flow_prev[i].y);
+  }
+  cv::Mat changed = f[1].gray.clone();
+  changed.at<uchar>(0, 0) ^= 1;  // different content: rebuilt, still close
+  const DynamicResult rc = run(a, 3, changed, f[2].gray);
+  EXPECT_GT(rc.flow_points.size(), 100u);
+}
+
+}  // namespace
+}  // namespace sp::dyn
