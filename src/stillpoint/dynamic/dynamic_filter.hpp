@@ -38,9 +38,10 @@ struct MotionCheckConfig {
   double fb_max_px = 1.0;            // forward-backward LK error above which a track is dropped [0.1, 10]
   double epsilon_epipolar_px = 1.0;  // epipolar distance above which a point moves [0.1, 20]
   double epsilon_reprojection_px = 2.0;  // reprojection residual above which a point moves [0.1, 50]
-  double ransac_threshold_px = 1.0;      // F-matrix / PnP RANSAC inlier threshold [0.1, 20]
-  double ransac_confidence = 0.99;       // [0.5, 0.9999]
-  int ransac_iterations = 200;           // PnP RANSAC iterations [10, 10000]
+  double ransac_threshold_px =
+      1.0;                          // F / homography RANSAC inlier threshold (PnP uses the epsilon) [0.1, 20]
+  double ransac_confidence = 0.99;  // [0.5, 0.9999]
+  int ransac_iterations = 200;      // PnP RANSAC iterations [10, 10000]
   int min_static_points = 15;  // fewer points outside boxes: ego-motion is fitted on all points [8, 1000]
   double moving_ratio_threshold = 0.3;  // share of moving points that makes a box dynamic [0, 1]
   int min_points_to_decide = 5;         // fewer tracked points in a box: undecided [1, 1000]
