@@ -58,6 +58,7 @@ struct RunArgs {
   std::string dynamic;
   std::string detector_model;
   std::string keyframe_policy;
+  std::string loop_detector;
 };
 
 std::filesystem::path default_dataset() {
@@ -78,6 +79,7 @@ int run(const RunArgs& args) {
   if (!args.dynamic.empty()) config.dynamic.mode = args.dynamic;
   if (!args.detector_model.empty()) config.dynamic.model = args.detector_model;
   if (!args.keyframe_policy.empty()) config.tracker.keyframes.policy = args.keyframe_policy;
+  if (!args.loop_detector.empty()) config.loop.detector = args.loop_detector;
   InterruptWatcher interrupt;  // before any thread starts, so all threads inherit the blocked mask
   io::TumSequenceOptions seq_options;
   if (!args.camera.empty()) seq_options.camera_file = args.camera;
@@ -91,6 +93,7 @@ int run(const RunArgs& args) {
   options.groundtruth = sequence.groundtruth_path();
   options.boxes_file = dataset / "boxes.txt";
   options.masks_dir = dataset / "masks";
+  options.project_root = SP_SOURCE_DIR;
   options.stop = &interrupt.flag();
   options.label = dataset.filename().string();
   options.extra_stats["dataset"] = dataset.string();
@@ -134,6 +137,8 @@ void add_run_command(CLI::App& app) {
       ->check(CLI::IsMember({"off", "flow", "detector", "detector+flow", "oracle", "auto"}));
   cmd->add_option("--detector-model", args->detector_model,
                   "YOLO model (.onnx, or Darknet .cfg with .weights)");
+  cmd->add_option("--loop-detector", args->loop_detector, "Loop detection: off|bow-keyframe|bow-sequence")
+      ->check(CLI::IsMember({"off", "bow-keyframe", "bow-sequence"}));
   cmd->add_option("--keyframe-policy", args->keyframe_policy, "heuristic|adaptive")
       ->check(CLI::IsMember({"heuristic", "adaptive"}));
   cmd->callback([args] {

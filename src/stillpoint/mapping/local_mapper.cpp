@@ -7,7 +7,6 @@
 #include <unordered_set>
 
 #include "stillpoint/common/timing.hpp"
-#include "stillpoint/features/descriptor.hpp"
 #include "stillpoint/tracking/projection_matcher.hpp"
 
 namespace sp::mapping {
@@ -83,65 +82,6 @@ int LocalMapper::cull_recent_points(map::MapView& view, map::KeyframeId kid) {
   return culled;
 }
 
-int LocalMapper::fuse_into(map::MapView& view, map::KeyframeId target,
-                           const std::vector<map::PointId>& points) {
-  map::Keyframe* kf = view.keyframe(target);
-  if (kf == nullptr || kf->bad) return 0;
-  const Eigen::Vector3d center = kf->camera_center();
-  int fused = 0;
-  for (map::PointId pid : points) {
-    map::MapPoint* p = view.live_point(pid);
-    if (p == nullptr || p->observations.contains(target)) continue;
-    Eigen::Vector2d uv;
-    double z = 0;
-    if (!track::project_point(kf->T_cw, p->position, camera_, uv, z)) continue;
-    const Eigen::Vector3d ray = p->position - center;
-    const double dist = ray.norm();
-    if (dist < 0.8 * p->min_distance || dist > 1.2 * p->max_distance) continue;
-    if (ray.dot(p->normal) / dist < 0.5) continue;
-    const int level = p->predict_level(dist, pyramid_);
-    const double r = config_.fusion_radius * pyramid_.scale[static_cast<std::size_t>(level)];
-    int best = 256, best_idx = -1;
-    for (int c : kf->index.in_area(uv.x(), uv.y(), r)) {
-      const auto ci = static_cast<std::size_t>(c);
-      const auto& kp = kf->features.keypoints[ci];
-      if (kp.octave < level - 1 || kp.octave > level) continue;
-      // Reprojection error gate (chi-square 3 dof for RGB-D, 2 dof otherwise).
-      const double inv_s2 = pyramid_.inv_level_sigma2[static_cast<std::size_t>(kp.octave)];
-      const double eu = uv.x() - kp.pt.x, ev = uv.y() - kp.pt.y;
-      double e2 = (eu * eu + ev * ev) * inv_s2;
-      const float ur = kf->features.u_right[ci];
-      if (ur > 0) {
-        const double er = uv.x() - depth_.bf / z - ur;
-        if ((e2 + er * er * inv_s2) > 7.8) continue;
-      } else if (e2 > 5.99) {
-        continue;
-      }
-      const int d = feat::hamming_distance(p->descriptor.ptr<std::uint8_t>(),
-                                           kf->features.descriptors.ptr<std::uint8_t>(c));
-      if (d < best) {
-        best = d;
-        best_idx = c;
-      }
-    }
-    if (best_idx < 0 || best > 50) continue;
-    const map::PointId existing = kf->points[static_cast<std::size_t>(best_idx)];
-    const map::MapPoint* other = existing == map::kNoPoint ? nullptr : view.live_point(existing);
-    if (other != nullptr) {
-      // Keep the better-observed point.
-      if (other->observations.size() >= p->observations.size()) {
-        view.replace_point(p->id, other->id);
-      } else {
-        view.replace_point(other->id, p->id);
-      }
-    } else {
-      view.add_observation(p->id, target, best_idx);
-    }
-    ++fused;
-  }
-  return fused;
-}
-
 int LocalMapper::fuse_neighbours(map::MapView& view, map::KeyframeId kid) {
   std::vector<map::KeyframeId> targets;
   std::set<map::KeyframeId> seen{kid};
@@ -155,11 +95,13 @@ int LocalMapper::fuse_neighbours(map::MapView& view, map::KeyframeId kid) {
     }
   }
   int fused = 0;
+  const track::MatchContext ctx{camera_, pyramid_, depth_.bf};
   std::vector<map::PointId> own;
   for (map::PointId pid : view.keyframe(kid)->points) {
     if (pid != map::kNoPoint) own.push_back(pid);
   }
-  for (map::KeyframeId t : targets) fused += fuse_into(view, t, own);
+  for (map::KeyframeId t : targets)
+    fused += track::fuse_into_keyframe(view, t, own, config_.fusion_radius, ctx);
   std::vector<map::PointId> theirs;
   std::unordered_set<map::PointId> uniq;
   for (map::KeyframeId t : targets) {
@@ -167,7 +109,7 @@ int LocalMapper::fuse_neighbours(map::MapView& view, map::KeyframeId kid) {
       if (pid != map::kNoPoint && uniq.insert(pid).second) theirs.push_back(pid);
     }
   }
-  fused += fuse_into(view, kid, theirs);
+  fused += track::fuse_into_keyframe(view, kid, theirs, config_.fusion_radius, ctx);
   for (map::PointId pid : view.keyframe(kid)->points) {
     if (pid == map::kNoPoint) continue;
     view.update_point_descriptor(pid);
@@ -224,6 +166,8 @@ bool LocalMapper::local_bundle_adjustment(map::KeyframeId kid, const std::atomic
     }
   }
   if (problem.keyframes.size() < 2) return false;
+  // A loop correction while BA runs makes its result stale: then it is dropped.
+  const std::uint64_t changes_before = map_.big_change_count();
   Stopwatch watch;
   const opt::BAResult result = opt::run_bundle_adjustment(problem, camera_model_, config_.ba, abort);
   stats.ba_ms = watch.elapsed_ms();
@@ -231,6 +175,7 @@ bool LocalMapper::local_bundle_adjustment(map::KeyframeId kid, const std::atomic
   if (result.aborted) return false;
 
   map::MapView view = map_.view();
+  if (map_.big_change_count() != changes_before) return false;
   for (std::size_t i = 0; i < problem.observations.size(); ++i) {
     if (!result.outlier[i]) continue;
     const auto& o = problem.observations[i];

@@ -45,7 +45,6 @@ class LocalMapper {
   void integrate(map::MapView& view, map::KeyframeId kid);
   int cull_recent_points(map::MapView& view, map::KeyframeId kid);
   int fuse_neighbours(map::MapView& view, map::KeyframeId kid);
-  int fuse_into(map::MapView& view, map::KeyframeId target, const std::vector<map::PointId>& points);
   bool local_bundle_adjustment(map::KeyframeId kid, const std::atomic<bool>* abort, LocalMappingStats& stats);
   int cull_keyframes(map::MapView& view, map::KeyframeId kid);
 

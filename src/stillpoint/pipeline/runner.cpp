@@ -51,8 +51,9 @@ void write_outputs(SlamSystem& system, const RunOptions& options, RunResult& res
 
 RunResult run_slam(io::FrameSource& source, const SystemConfig& config, const RunOptions& options) {
   RunResult result;
-  SlamSystem system(config, source.camera(),
-                    SystemOptions{options.deterministic, options.boxes_file, options.masks_dir});
+  SlamSystem system(
+      config, source.camera(),
+      SystemOptions{options.deterministic, options.boxes_file, options.masks_dir, options.project_root});
   ProgressBar bar(options.label.empty() ? "tracking" : options.label, source.size_hint(), options.progress);
   Stopwatch wall;
   std::size_t done = 0;

@@ -19,6 +19,7 @@ struct RunOptions {
   std::optional<std::filesystem::path> groundtruth;
   std::optional<std::filesystem::path> boxes_file;  // for oracle culling
   std::optional<std::filesystem::path> masks_dir;   // for scoring culling
+  std::filesystem::path project_root = ".";         // where relative resource paths resolve
   const std::atomic<bool>* stop = nullptr;          // set asynchronously (SIGINT) to end the run early
   std::string label;                                // shown in the progress bar
   nlohmann::json extra_stats;                       // merged into stats.json (mode switches etc.)

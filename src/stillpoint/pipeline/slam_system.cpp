@@ -27,14 +27,31 @@ SlamSystem::SlamSystem(SystemConfig config, io::CameraConfig camera, const Syste
               frontend_.pyramid()) {
   if (options.masks_dir && std::filesystem::is_directory(*options.masks_dir))
     culling_score_.emplace(*options.masks_dir);
+  const track::DepthModel depth = with_camera_range(config_.depth, camera_);
+  if (config_.loop.detector != "off") {
+    std::filesystem::path vocab_file = config_.loop.vocabulary;
+    if (vocab_file.is_relative()) vocab_file = options.project_root / vocab_file;
+    Stopwatch load;
+    auto vocabulary = std::make_shared<const loop::Vocabulary>(loop::Vocabulary::load(vocab_file));
+    vocabulary_load_ms_ = load.elapsed_ms();
+    vocabulary_words_ = vocabulary->size();
+    closer_ = std::make_unique<loop::LoopCloser>(map_, config_.loop, vocabulary, camera_.intrinsics, depth,
+                                                 frontend_.pyramid(), deterministic_);
+    loop_stage_ = std::make_unique<LoopClosingStage>(*closer_, times_, config_.pipeline.loop_queue);
+  }
+  LocalMappingStage::Downstream downstream;
+  if (loop_stage_) downstream = [this](map::KeyframeId kf) { loop_stage_->submit(kf); };
   mapping_stage_ =
-      std::make_unique<LocalMappingStage>(mapper_, times_, nullptr, config_.pipeline.mapping_queue);
-  if (!deterministic_) mapping_stage_->start();
+      std::make_unique<LocalMappingStage>(mapper_, times_, downstream, config_.pipeline.mapping_queue);
+  if (!deterministic_) {
+    if (loop_stage_) loop_stage_->start();
+    mapping_stage_->start();
+  }
 }
 
 SlamSystem::~SlamSystem() { finish(); }
 
-bool SlamSystem::failed() const { return mapping_stage_->failed(); }
+bool SlamSystem::failed() const { return mapping_stage_->failed() || (loop_stage_ && loop_stage_->failed()); }
 
 FrameReport SlamSystem::process(const io::FrameData& data) {
   Stopwatch frame_watch;
@@ -73,7 +90,9 @@ FrameReport SlamSystem::process(const io::FrameData& data) {
 void SlamSystem::finish() {
   if (finished_) return;
   finished_ = true;
-  mapping_stage_->stop();
+  mapping_stage_->stop();  // drains into the loop stage
+  if (loop_stage_) loop_stage_->stop();
+  if (closer_) closer_->finish();
 }
 
 std::vector<io::StampedPose> SlamSystem::trajectory() {
@@ -117,6 +136,19 @@ nlohmann::json SlamSystem::statistics() {
                     {"median_ms", s.median}, {"p95_ms", s.p95},     {"max_ms", s.max}};
   }
   j["stages_ms"] = stages;
+  j["loop_detector"] = closer_ ? config_.loop.detector : std::string("off");
+  if (closer_) {
+    const auto ls = closer_->stats();
+    j["loops_detected"] = ls.loops_detected;
+    j["loops_closed"] = ls.loops_closed;
+    j["loop_candidates"] = ls.candidates;
+    j["loop_queries"] = ls.queries;
+    j["loop_detection_ms_total"] = ls.detection_ms_total;
+    j["loop_correction_ms_total"] = ls.correction_ms_total;
+    j["global_ba_runs"] = ls.global_ba_runs;
+    j["vocabulary_words"] = vocabulary_words_;
+    j["vocabulary_load_ms"] = vocabulary_load_ms_;
+  }
   j["peak_rss_mib"] = peak_rss_mib();
   j["deterministic"] = deterministic_;
   return j;

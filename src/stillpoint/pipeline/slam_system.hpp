@@ -15,6 +15,7 @@
 #include "stillpoint/pipeline/dynamic_culling.hpp"
 #include "stillpoint/pipeline/frontend.hpp"
 #include "stillpoint/pipeline/local_mapping_stage.hpp"
+#include "stillpoint/pipeline/loop_closing_stage.hpp"
 #include "stillpoint/pipeline/system_config.hpp"
 
 namespace sp::pipeline {
@@ -31,6 +32,7 @@ struct SystemOptions {
   bool deterministic = false;
   std::optional<std::filesystem::path> boxes_file;  // oracle detections (dynsynth boxes.txt)
   std::optional<std::filesystem::path> masks_dir;   // score culling against ground-truth masks
+  std::filesystem::path project_root = ".";         // relative resource paths (vocabulary) resolve here
 };
 
 class SlamSystem {
@@ -61,11 +63,15 @@ class SlamSystem {
   std::optional<CullingScore> culling_score_;
   track::Tracker tracker_;
   mapping::LocalMapper mapper_;
+  std::unique_ptr<loop::LoopCloser> closer_;
+  std::unique_ptr<LoopClosingStage> loop_stage_;
   std::unique_ptr<LocalMappingStage> mapping_stage_;
   std::size_t frames_ = 0;
   std::size_t culled_total_ = 0;
   std::size_t keyframes_created_ = 0;
   bool finished_ = false;
+  double vocabulary_load_ms_ = 0;
+  std::size_t vocabulary_words_ = 0;
 };
 
 }  // namespace sp::pipeline

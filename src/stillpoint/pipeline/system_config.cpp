@@ -26,6 +26,7 @@ SystemConfig SystemConfig::from_yaml(const ConfigReader& r) {
   c.tracker = track::TrackerConfig::from_yaml(r.section("tracking"));
   c.mapping = mapping::LocalMappingConfig::from_yaml(r.section("local_mapping"));
   c.dynamic = DynamicConfig::from_yaml(r.section("dynamic"));
+  c.loop = loop::LoopClosingConfig::from_yaml(r.section("loop_closing"));
   c.pipeline = PipelineConfig::from_yaml(r.section("pipeline"));
   return c;
 }

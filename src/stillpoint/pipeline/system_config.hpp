@@ -6,6 +6,7 @@
 
 #include "stillpoint/common/config_reader.hpp"
 #include "stillpoint/features/orb_extractor.hpp"
+#include "stillpoint/loop/loop_closer.hpp"
 #include "stillpoint/mapping/local_mapper.hpp"
 #include "stillpoint/pipeline/dynamic_culling.hpp"
 #include "stillpoint/tracking/frame.hpp"
@@ -25,6 +26,7 @@ struct SystemConfig {
   track::TrackerConfig tracker;
   mapping::LocalMappingConfig mapping;
   DynamicConfig dynamic;
+  loop::LoopClosingConfig loop;
   PipelineConfig pipeline;
 
   static SystemConfig from_yaml(const ConfigReader& r);

@@ -172,4 +172,63 @@ int match_keyframe(map::MapView& view, Frame& cur, const map::Keyframe& kf, floa
   return matches;
 }
 
+int fuse_into_keyframe(map::MapView& view, map::KeyframeId target, const std::vector<map::PointId>& points,
+                       double radius, const MatchContext& ctx) {
+  map::Keyframe* kf = view.keyframe(target);
+  if (kf == nullptr || kf->bad) return 0;
+  const Eigen::Vector3d center = kf->camera_center();
+  int fused = 0;
+  for (map::PointId pid : points) {
+    map::MapPoint* p = view.live_point(pid);
+    if (p == nullptr || p->observations.contains(target)) continue;
+    Eigen::Vector2d uv;
+    double z = 0;
+    if (!project_point(kf->T_cw, p->position, ctx.camera, uv, z)) continue;
+    const Eigen::Vector3d ray = p->position - center;
+    const double dist = ray.norm();
+    if (dist < 0.8 * p->min_distance || dist > 1.2 * p->max_distance) continue;
+    if (ray.dot(p->normal) / dist < 0.5) continue;
+    const int level = p->predict_level(dist, ctx.pyramid);
+    const double r = radius * ctx.pyramid.scale[static_cast<std::size_t>(level)];
+    int best = 256, best_idx = -1;
+    for (int c : kf->index.in_area(uv.x(), uv.y(), r)) {
+      const auto ci = static_cast<std::size_t>(c);
+      const auto& kp = kf->features.keypoints[ci];
+      if (kp.octave < level - 1 || kp.octave > level) continue;
+      // Reprojection error gate (chi-square 3 dof for RGB-D, 2 dof otherwise).
+      const double inv_s2 = ctx.pyramid.inv_level_sigma2[static_cast<std::size_t>(kp.octave)];
+      const double eu = uv.x() - kp.pt.x, ev = uv.y() - kp.pt.y;
+      double e2 = (eu * eu + ev * ev) * inv_s2;
+      const float ur = kf->features.u_right[ci];
+      if (ur > 0) {
+        const double er = uv.x() - ctx.bf / z - ur;
+        if ((e2 + er * er * inv_s2) > 7.8) continue;
+      } else if (e2 > 5.99) {
+        continue;
+      }
+      const int d = feat::hamming_distance(p->descriptor.ptr<std::uint8_t>(),
+                                           kf->features.descriptors.ptr<std::uint8_t>(c));
+      if (d < best) {
+        best = d;
+        best_idx = c;
+      }
+    }
+    if (best_idx < 0 || best > 50) continue;
+    const map::PointId existing = kf->points[static_cast<std::size_t>(best_idx)];
+    const map::MapPoint* other = existing == map::kNoPoint ? nullptr : view.live_point(existing);
+    if (other != nullptr) {
+      // Keep the better-observed point.
+      if (other->observations.size() >= p->observations.size()) {
+        view.replace_point(p->id, other->id);
+      } else {
+        view.replace_point(other->id, p->id);
+      }
+    } else {
+      view.add_observation(p->id, target, best_idx);
+    }
+    ++fused;
+  }
+  return fused;
+}
+
 }  // namespace sp::track

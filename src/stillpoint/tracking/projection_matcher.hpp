@@ -32,6 +32,12 @@ int match_local_points(map::MapView& view, Frame& cur, const std::vector<map::Po
 // orientation consistency). Used when the motion model fails and for relocalisation.
 int match_keyframe(map::MapView& view, Frame& cur, const map::Keyframe& kf, float ratio);
 
+// Projects map points into a keyframe and merges each with the feature it lands on: the feature
+// gains the observation, or, when it already has a point, the better-observed point replaces the
+// other. Used by local mapping (neighbours) and loop closing (the two sides of a loop).
+int fuse_into_keyframe(map::MapView& view, map::KeyframeId target, const std::vector<map::PointId>& points,
+                       double radius, const MatchContext& ctx);
+
 // Projects p_w with T_cw; returns false when behind the camera or outside the image.
 bool project_point(const geo::SE3& T_cw, const Eigen::Vector3d& p_w, const geo::CameraIntrinsics& camera,
                    Eigen::Vector2d& uv, double& depth);

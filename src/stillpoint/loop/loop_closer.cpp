@@ -1,0 +1,403 @@
+#include "stillpoint/loop/loop_closer.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <map>
+#include <unordered_map>
+#include <unordered_set>
+
+#include "stillpoint/common/timing.hpp"
+#include "stillpoint/features/matching.hpp"
+#include "stillpoint/geometry/ransac_se3.hpp"
+#include "stillpoint/optimize/pose_graph.hpp"
+#include "stillpoint/optimize/pose_optimizer.hpp"
+#include "stillpoint/tracking/projection_matcher.hpp"
+
+namespace sp::loop {
+
+LoopClosingConfig LoopClosingConfig::from_yaml(const ConfigReader& r) {
+  LoopClosingConfig c;
+  r.read_choice("detector", c.detector, {"off", "bow-keyframe", "bow-sequence"});
+  r.read("vocabulary", c.vocabulary);
+  c.detection = LoopDetectorParams::from_yaml(r.section("detection"));
+  r.read("min_keyframes", c.min_keyframes, std::size_t{2}, std::size_t{10000});
+  r.read("min_descriptor_matches", c.min_descriptor_matches, 3, 10000);
+  r.read("ransac_threshold_m", c.ransac_threshold_m, 0.001, 1.0);
+  r.read("min_ransac_inliers", c.min_ransac_inliers, 3, 10000);
+  r.read("min_projection_inliers", c.min_projection_inliers, 3, 10000);
+  r.read("global_ba", c.global_ba);
+  r.read("global_ba_iterations", c.global_ba_iterations, 1, 1000);
+  return c;
+}
+
+namespace {
+
+// The covisibility graph as the detectors see it; takes the map lock per call.
+class MapCovisibility final : public CovisibilityView {
+ public:
+  explicit MapCovisibility(map::Map& map) : map_(map) {}
+  [[nodiscard]] std::vector<KeyframeId> covisible(KeyframeId id, int n_best) const override {
+    map::MapView view = map_.view();
+    return view.best_covisibles(
+        id, n_best <= 0 ? std::numeric_limits<std::size_t>::max() : static_cast<std::size_t>(n_best));
+  }
+
+ private:
+  map::Map& map_;
+};
+
+}  // namespace
+
+LoopCloser::LoopCloser(map::Map& map, LoopClosingConfig config, std::shared_ptr<const Vocabulary> vocabulary,
+                       geo::CameraIntrinsics camera, track::DepthModel depth, map::ScalePyramid pyramid,
+                       bool deterministic)
+    : map_(map),
+      config_(std::move(config)),
+      vocabulary_(std::move(vocabulary)),
+      camera_(camera),
+      depth_(depth),
+      pyramid_(std::move(pyramid)),
+      deterministic_(deterministic) {
+  if (config_.detector != "off" && vocabulary_ != nullptr) {
+    detector_ = make_loop_detector(config_.detector, config_.detection);
+  }
+}
+
+LoopCloser::~LoopCloser() {
+  abort_global_ba_ = true;
+  finish();
+}
+
+void LoopCloser::finish() {
+  if (global_ba_thread_.joinable()) global_ba_thread_.join();
+}
+
+LoopClosingStats LoopCloser::stats() const {
+  std::lock_guard lock(stats_mutex_);
+  LoopClosingStats s = stats_;
+  if (detector_) s.queries = detector_->queries();
+  return s;
+}
+
+void LoopCloser::process(map::KeyframeId kid) {
+  if (!detector_) return;
+  Stopwatch watch;
+  KeyframeInfo info;
+  std::size_t keyframes = 0;
+  {
+    map::MapView view = map_.view();
+    const map::Keyframe* kf = view.keyframe(kid);
+    if (kf == nullptr || kf->bad) return;
+    info.id = kid;
+    info.R_cw = kf->T_cw.rotation();
+    keyframes = view.live_keyframes();
+    const cv::Mat descriptors = kf->features.descriptors.clone();
+    view.keyframe(kid)->protected_from_culling = true;  // until detection is done with it
+    info.bow = vocabulary_->transform(descriptors);
+  }
+  std::vector<LoopCandidate> candidates;
+  const MapCovisibility covisibility(map_);
+  // Right after a loop, or on a small map, the keyframe is only filed.
+  if (keyframes < config_.min_keyframes || (last_loop_keyframe_ != 0 && kid < last_loop_keyframe_ + 10)) {
+    detector_->add_keyframe(info);
+  } else {
+    candidates = detector_->detect(info, covisibility);
+  }
+  {
+    std::lock_guard lock(stats_mutex_);
+    stats_.keyframes++;
+    stats_.detection_ms_total += watch.elapsed_ms();
+    stats_.candidates += candidates.size();
+  }
+  {
+    map::MapView view = map_.view();
+    if (map::Keyframe* kf = view.keyframe(kid)) kf->protected_from_culling = false;
+  }
+  for (const LoopCandidate& c : candidates) {
+    const auto verified = verify(c.query, c.match);
+    if (!verified) continue;
+    {
+      std::lock_guard lock(stats_mutex_);
+      ++stats_.loops_detected;
+    }
+    spdlog::info("loop detected: keyframe {} revisits keyframe {} ({} inliers)", c.query, c.match,
+                 verified->inliers);
+    Stopwatch correction;
+    correct(c.query, c.match, verified->T_query_w);
+    {
+      std::lock_guard lock(stats_mutex_);
+      ++stats_.loops_closed;
+      stats_.correction_ms_total += correction.elapsed_ms();
+    }
+    last_loop_keyframe_ = kid;
+    break;
+  }
+}
+
+std::optional<LoopCloser::Verified> LoopCloser::verify(map::KeyframeId query, map::KeyframeId match) {
+  map::MapView view = map_.view();
+  const map::Keyframe* q = view.keyframe(query);
+  const map::Keyframe* m = view.keyframe(match);
+  if (q == nullptr || m == nullptr || q->bad || m->bad) return std::nullopt;
+
+  // 1. Descriptor matches: query features with depth against the match keyframe's map points.
+  std::vector<int> q_rows, m_rows;
+  for (std::size_t i = 0; i < q->features.size(); ++i) {
+    if (q->features.depth[i] > 0) q_rows.push_back(static_cast<int>(i));
+  }
+  std::vector<map::PointId> m_points;
+  for (std::size_t i = 0; i < m->points.size(); ++i) {
+    const map::MapPoint* p = m->points[i] == map::kNoPoint ? nullptr : view.live_point(m->points[i]);
+    if (p == nullptr) continue;
+    m_rows.push_back(static_cast<int>(i));
+    m_points.push_back(p->id);
+  }
+  if (q_rows.size() < 20 || m_rows.size() < 20) return std::nullopt;
+  cv::Mat q_desc(static_cast<int>(q_rows.size()), 32, CV_8U),
+      m_desc(static_cast<int>(m_rows.size()), 32, CV_8U);
+  for (std::size_t r = 0; r < q_rows.size(); ++r)
+    q->features.descriptors.row(q_rows[r]).copyTo(q_desc.row(static_cast<int>(r)));
+  for (std::size_t r = 0; r < m_rows.size(); ++r)
+    m->features.descriptors.row(m_rows[r]).copyTo(m_desc.row(static_cast<int>(r)));
+  const auto matches = feat::match_ratio(q_desc, m_desc, 0.75f, track::kDescriptorThLow, true);
+  if (static_cast<int>(matches.size()) < config_.min_descriptor_matches) return std::nullopt;
+
+  // 2. 3-D/3-D RANSAC: the match side's map points (world) against the query's depth points (camera).
+  std::vector<Eigen::Vector3d> src, dst;
+  for (const auto& mt : matches) {
+    const auto qi = static_cast<std::size_t>(q_rows[static_cast<std::size_t>(mt.query)]);
+    const auto& kp = q->features.keypoints[qi];
+    dst.push_back(camera_.unproject({kp.pt.x, kp.pt.y}, q->features.depth[qi]));
+    src.push_back(view.point(m_points[static_cast<std::size_t>(mt.train)])->position);
+  }
+  geo::RansacSe3Config rc;
+  rc.inlier_threshold = config_.ransac_threshold_m;
+  rc.min_inliers = config_.min_ransac_inliers;
+  rc.seed = static_cast<std::uint32_t>(query);
+  const auto ransac = geo::estimate_se3_ransac(src, dst, rc);
+  if (!ransac) return std::nullopt;
+
+  // 3. Refine: project the loop side's local map into the query with the RANSAC pose, then optimise.
+  track::Frame frame;
+  frame.features = q->features;
+  frame.grid = map::FeatureIndex(frame.features.keypoints, camera_.width, camera_.height);
+  frame.reset_matches();
+  frame.T_cw = ransac->T_dst_src;
+  frame.has_pose = true;
+  std::vector<map::PointId> local;
+  std::unordered_set<map::PointId> seen;
+  std::vector<map::KeyframeId> loop_side = view.best_covisibles(match, 10);
+  loop_side.push_back(match);
+  for (map::KeyframeId k : loop_side) {
+    const map::Keyframe* kf = view.keyframe(k);
+    if (kf == nullptr || kf->bad) continue;
+    for (map::PointId pid : kf->points) {
+      if (pid != map::kNoPoint && seen.insert(pid).second) local.push_back(pid);
+    }
+  }
+  track::match_local_points(view, frame, local, 3.0, track::MatchContext{camera_, pyramid_, depth_.bf});
+  std::vector<opt::PoseObservation> obs;
+  for (std::size_t i = 0; i < frame.points.size(); ++i) {
+    if (frame.points[i] == map::kNoPoint) continue;
+    const auto& kp = frame.features.keypoints[i];
+    obs.push_back({view.point(frame.points[i])->position,
+                   {kp.pt.x, kp.pt.y},
+                   frame.features.u_right[i],
+                   pyramid_.inv_level_sigma2[static_cast<std::size_t>(kp.octave)]});
+  }
+  if (static_cast<int>(obs.size()) < config_.min_projection_inliers) return std::nullopt;
+  geo::SE3 T = ransac->T_dst_src;
+  const auto result =
+      opt::optimize_pose(T, obs, opt::CameraModel{camera_.fx, camera_.fy, camera_.cx, camera_.cy, depth_.bf},
+                         opt::PoseOptimizerConfig{});
+  if (result.inliers < config_.min_projection_inliers) return std::nullopt;
+  return Verified{T, result.inliers};
+}
+
+void LoopCloser::correct(map::KeyframeId query, map::KeyframeId match, const geo::SE3& T_query_w) {
+  abort_global_ba_ = true;  // a newer loop makes a running global BA obsolete
+  finish();
+  abort_global_ba_ = false;
+  std::uint64_t changes = 0;
+  {
+    map::MapView view = map_.view();
+    map::Keyframe* q = view.keyframe(query);
+    if (q == nullptr || q->bad) return;
+    // Poses before the correction: every old edge of the essential graph keeps its relative pose.
+    std::unordered_map<map::KeyframeId, geo::SE3> old_pose;
+    for (map::KeyframeId k : view.keyframe_ids_sorted()) old_pose[k] = view.keyframe(k)->T_cw;
+
+    // 1. Move the query's covisible group rigidly onto the loop side, with its points.
+    std::vector<map::KeyframeId> group = view.best_covisibles(query, std::numeric_limits<std::size_t>::max());
+    group.push_back(query);
+    const geo::SE3 T_wq_old = q->T_cw.inverse();
+    std::unordered_map<map::KeyframeId, geo::SE3> corrected;
+    for (map::KeyframeId k : group) corrected[k] = view.keyframe(k)->T_cw * T_wq_old * T_query_w;
+    std::unordered_set<map::PointId> moved;
+    for (map::KeyframeId k : group) {
+      map::Keyframe* kf = view.keyframe(k);
+      const geo::SE3 delta = corrected[k].inverse() * kf->T_cw;  // old world -> corrected world
+      for (map::PointId pid : kf->points) {
+        map::MapPoint* p = pid == map::kNoPoint ? nullptr : view.live_point(pid);
+        if (p == nullptr || !moved.insert(p->id).second) continue;
+        p->position = delta * p->position;
+      }
+    }
+    for (map::KeyframeId k : group) view.keyframe(k)->T_cw = corrected[k];
+
+    // 2. Fuse the loop side's points into the group: duplicates become one point.
+    std::vector<map::KeyframeId> loop_side = view.best_covisibles(match, 10);
+    loop_side.push_back(match);
+    std::vector<map::PointId> loop_points;
+    std::unordered_set<map::PointId> seen;
+    for (map::KeyframeId k : loop_side) {
+      for (map::PointId pid : view.keyframe(k)->points) {
+        if (pid != map::kNoPoint && seen.insert(pid).second) loop_points.push_back(pid);
+      }
+    }
+    const track::MatchContext ctx{camera_, pyramid_, depth_.bf};
+    for (map::KeyframeId k : group) track::fuse_into_keyframe(view, k, loop_points, 4.0, ctx);
+    for (map::KeyframeId k : group) view.update_connections(k);
+    view.keyframe(query)->loop_edges.insert(match);
+    view.keyframe(match)->loop_edges.insert(query);
+
+    // 3. Pose graph over the essential graph: spanning tree, strong covisibility, loop edges.
+    std::vector<opt::PoseGraphVertex> vertices;
+    std::vector<opt::PoseGraphEdge> edges;
+    const std::vector<map::KeyframeId> ids = view.keyframe_ids_sorted();
+    const std::unordered_set<map::KeyframeId> in_group(group.begin(), group.end());
+    auto relative_old = [&](map::KeyframeId i, map::KeyframeId j) {
+      return old_pose[i] * old_pose[j].inverse();
+    };
+    for (map::KeyframeId k : ids) {
+      const map::Keyframe* kf = view.keyframe(k);
+      vertices.push_back({k, kf->T_cw, k == ids.front() || k == match});
+      if (kf->parent != map::kNoKeyframe && old_pose.contains(kf->parent) &&
+          !view.keyframe(kf->parent)->bad) {
+        edges.push_back({k, kf->parent, relative_old(k, kf->parent), 1.0});
+      }
+      for (const auto& [other, w] : kf->covisibility) {
+        if (other < k && w >= 100 && other != kf->parent && old_pose.contains(other)) {
+          edges.push_back({k, other, relative_old(k, other), 1.0});
+        }
+      }
+      for (map::KeyframeId other : kf->loop_edges) {
+        if (other >= k || !old_pose.contains(other)) continue;
+        const bool new_edge = (k == query && other == match) || (k == match && other == query);
+        // The new loop edge is measured with the corrected pose; old loop edges keep their geometry.
+        edges.push_back({k, other,
+                         new_edge ? view.keyframe(k)->T_cw * view.keyframe(other)->T_cw.inverse()
+                                  : relative_old(k, other),
+                         1.0});
+      }
+    }
+    const std::unordered_map<map::KeyframeId, geo::SE3> before_graph = [&] {
+      std::unordered_map<map::KeyframeId, geo::SE3> m;
+      for (const auto& v : vertices) m[v.id] = v.T_cw;
+      return m;
+    }();
+    opt::optimize_pose_graph(vertices, edges, opt::PoseGraphConfig{});
+    for (const auto& v : vertices) view.keyframe(v.id)->T_cw = v.T_cw;
+
+    // 4. Points follow their reference keyframe.
+    for (const auto& [pid, p] : view.points()) {
+      if (p.bad) continue;
+      const map::Keyframe* ref = view.keyframe(p.reference);
+      if (ref == nullptr || !before_graph.contains(p.reference)) continue;
+      map::MapPoint* mp = view.point(pid);
+      mp->position = ref->T_cw.inverse() * (before_graph.at(p.reference) * mp->position);
+    }
+    for (const auto& [pid, p] : view.points()) {
+      if (!p.bad) view.update_point_normal_and_depth(pid, pyramid_);
+    }
+    (void)in_group;
+    map_.notify_big_change();
+    changes = map_.big_change_count();
+  }
+  if (config_.global_ba) start_global_ba(changes);
+}
+
+void LoopCloser::start_global_ba(std::uint64_t changes_at_start) {
+  if (deterministic_) {
+    run_global_ba(changes_at_start);
+  } else {
+    global_ba_thread_ = std::thread([this, changes_at_start] { run_global_ba(changes_at_start); });
+  }
+}
+
+void LoopCloser::run_global_ba(std::uint64_t changes_at_start) {
+  opt::BAProblem problem;
+  {
+    map::MapView view = map_.view();
+    const auto ids = view.keyframe_ids_sorted();
+    for (map::KeyframeId k : ids) problem.keyframes.push_back({k, view.keyframe(k)->T_cw, k == ids.front()});
+    std::vector<map::PointId> pids;
+    for (const auto& [pid, p] : view.points()) {
+      if (!p.bad) pids.push_back(pid);
+    }
+    std::sort(pids.begin(), pids.end());
+    for (map::PointId pid : pids) {
+      const map::MapPoint* p = view.point(pid);
+      problem.points.push_back({pid, p->position});
+      for (const auto& [k, feature] : p->observations) {
+        const map::Keyframe* kf = view.keyframe(k);
+        if (kf == nullptr || kf->bad) continue;
+        const auto& kp = kf->features.keypoints[static_cast<std::size_t>(feature)];
+        problem.observations.push_back({k,
+                                        pid,
+                                        {kp.pt.x, kp.pt.y},
+                                        kf->features.u_right[static_cast<std::size_t>(feature)],
+                                        pyramid_.inv_level_sigma2[static_cast<std::size_t>(kp.octave)]});
+      }
+    }
+  }
+  opt::BAConfig cfg;
+  cfg.iterations_first = config_.global_ba_iterations;
+  cfg.iterations_second = config_.global_ba_iterations;
+  const auto result = opt::run_bundle_adjustment(
+      problem, opt::CameraModel{camera_.fx, camera_.fy, camera_.cx, camera_.cy, depth_.bf}, cfg,
+      &abort_global_ba_);
+  std::lock_guard stats_lock(stats_mutex_);
+  ++stats_.global_ba_runs;
+  if (result.aborted) {
+    ++stats_.global_ba_aborted;
+    return;
+  }
+  map::MapView view = map_.view();
+  if (map_.big_change_count() != changes_at_start) return;  // another correction happened meanwhile
+  // Keyframes added while BA ran follow their spanning-tree parent's correction.
+  std::unordered_map<map::KeyframeId, std::pair<geo::SE3, geo::SE3>> change;  // old, new
+  for (const auto& k : problem.keyframes) {
+    map::Keyframe* kf = view.keyframe(k.id);
+    if (kf == nullptr) continue;
+    change[k.id] = {kf->T_cw, k.T_cw};
+    kf->T_cw = k.T_cw;
+  }
+  for (map::KeyframeId k : view.keyframe_ids_sorted()) {
+    if (change.contains(k)) continue;
+    map::Keyframe* kf = view.keyframe(k);
+    const auto it = change.find(kf->parent);
+    if (it == change.end()) continue;
+    const geo::SE3 old_pose = kf->T_cw;
+    kf->T_cw = kf->T_cw * it->second.first.inverse() * it->second.second;
+    change[k] = {old_pose, kf->T_cw};
+  }
+  std::unordered_set<map::PointId> optimised;
+  for (const auto& p : problem.points) {
+    if (map::MapPoint* mp = view.point(p.id); mp != nullptr && !mp->bad) {
+      mp->position = p.p_w;
+      optimised.insert(p.id);
+    }
+  }
+  for (const auto& [pid, p] : view.points()) {
+    if (p.bad || optimised.contains(pid)) continue;
+    const auto it = change.find(p.reference);
+    if (it == change.end()) continue;
+    view.point(pid)->position = it->second.second.inverse() * (it->second.first * p.position);
+  }
+  map_.notify_big_change();
+  spdlog::info("global BA done: {} keyframes, {} points", problem.keyframes.size(), problem.points.size());
+}
+
+}  // namespace sp::loop

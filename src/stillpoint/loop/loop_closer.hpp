@@ -1,0 +1,88 @@
+#pragma once
+// Loop closing over the map: detection (BoW per keyframe or per keyframe sequence), RGB-D geometric
+// verification (descriptor matches -> 3-D/3-D RANSAC SE(3) -> projection matches -> pose refinement),
+// correction (fuse the two sides, pose graph over the essential graph), and a global bundle
+// adjustment in a background thread that tracking never waits for and a newer loop aborts.
+#include <atomic>
+#include <memory>
+#include <mutex>
+#include <thread>
+
+#include "stillpoint/common/config_reader.hpp"
+#include "stillpoint/loop/loop_detector.hpp"
+#include "stillpoint/loop/vocabulary.hpp"
+#include "stillpoint/map/map.hpp"
+#include "stillpoint/optimize/bundle_adjustment.hpp"
+#include "stillpoint/tracking/frame.hpp"
+
+namespace sp::loop {
+
+struct LoopClosingConfig {
+  std::string detector = "bow-sequence";                     // off | bow-keyframe | bow-sequence
+  std::string vocabulary = "data/vocab/stillpoint_orb.spv";  // relative paths: from the project root
+  LoopDetectorParams detection;
+  std::size_t min_keyframes = 10;    // no detection before the map has this many keyframes
+  int min_descriptor_matches = 20;   // BoW-candidate keyframes sharing fewer matches are dropped
+  double ransac_threshold_m = 0.05;  // 3-D/3-D RANSAC inlier distance
+  int min_ransac_inliers = 20;
+  int min_projection_inliers = 40;  // inliers after refinement with projection matches
+  bool global_ba = true;            // run a global BA after each closed loop (background thread)
+  int global_ba_iterations = 10;
+  static LoopClosingConfig from_yaml(const ConfigReader& r);
+};
+
+struct LoopClosingStats {
+  std::size_t keyframes = 0;
+  std::size_t candidates = 0;      // candidates from the detector (before verification)
+  std::size_t loops_detected = 0;  // candidates that passed geometric verification
+  std::size_t loops_closed = 0;    // corrections applied
+  std::size_t queries = 0;         // database queries made by the detector
+  double detection_ms_total = 0;   // BoW conversion + candidate search (not verification)
+  double correction_ms_total = 0;
+  std::size_t global_ba_runs = 0;
+  std::size_t global_ba_aborted = 0;
+};
+
+class LoopCloser {
+ public:
+  LoopCloser(map::Map& map, LoopClosingConfig config, std::shared_ptr<const Vocabulary> vocabulary,
+             geo::CameraIntrinsics camera, track::DepthModel depth, map::ScalePyramid pyramid,
+             bool deterministic);
+  ~LoopCloser();
+  LoopCloser(const LoopCloser&) = delete;
+  LoopCloser& operator=(const LoopCloser&) = delete;
+
+  // Handles one new keyframe (called in keyframe order by the loop-closing stage).
+  void process(map::KeyframeId keyframe);
+  // Waits for a running global BA (end of run).
+  void finish();
+  [[nodiscard]] LoopClosingStats stats() const;
+  [[nodiscard]] bool enabled() const { return detector_ != nullptr; }
+
+ private:
+  struct Verified {
+    geo::SE3 T_query_w;  // corrected pose of the query keyframe
+    int inliers = 0;
+  };
+  std::optional<Verified> verify(map::KeyframeId query, map::KeyframeId match);
+  void correct(map::KeyframeId query, map::KeyframeId match, const geo::SE3& T_query_w);
+  void start_global_ba(std::uint64_t changes_at_start);
+  void run_global_ba(std::uint64_t changes_at_start);
+
+  map::Map& map_;
+  LoopClosingConfig config_;
+  std::shared_ptr<const Vocabulary> vocabulary_;
+  geo::CameraIntrinsics camera_;
+  track::DepthModel depth_;
+  map::ScalePyramid pyramid_;
+  bool deterministic_;
+  std::unique_ptr<LoopDetector> detector_;
+  std::size_t last_loop_keyframe_ = 0;
+
+  mutable std::mutex stats_mutex_;
+  LoopClosingStats stats_;
+  std::thread global_ba_thread_;
+  std::atomic<bool> abort_global_ba_{false};
+};
+
+}  // namespace sp::loop

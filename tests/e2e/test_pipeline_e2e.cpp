@@ -1,0 +1,127 @@
+// End-to-end: the whole system on ~150 frames of the shared dynsynth sequences, in deterministic
+// mode, checked against ground truth (ATE bounds), for reproducibility and for clean early stops.
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include "stillpoint/io/tum_sequence.hpp"
+#include "stillpoint/pipeline/runner.hpp"
+
+namespace sp::pipeline {
+namespace {
+
+const std::filesystem::path kData = std::filesystem::path(SP_SHARED_DIR) / "data" / "dynsynth";
+const std::filesystem::path kConfig = std::filesystem::path(SP_SOURCE_DIR) / "config" / "stillpoint.yaml";
+
+std::filesystem::path scratch(const std::string& name) {
+  const auto dir = std::filesystem::path(SP_TEST_TMP_DIR) / "e2e" / name;
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  return dir;
+}
+
+std::string read_file(const std::filesystem::path& p) {
+  std::ifstream in(p);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+RunResult run(const std::string& sequence, const std::string& out_name, const std::string& dynamic_mode,
+              bool deterministic = true, const std::atomic<bool>* stop = nullptr) {
+  const auto dir = kData / sequence;
+  io::TumSequence source(dir);
+  SystemConfig config = SystemConfig::load(kConfig);
+  config.dynamic.mode = dynamic_mode;
+  RunOptions options;
+  options.out_dir = scratch(out_name);
+  options.deterministic = deterministic;
+  options.progress = false;
+  options.groundtruth = source.groundtruth_path();
+  options.boxes_file = dir / "boxes.txt";
+  options.masks_dir = dir / "masks";
+  options.stop = stop;
+  return run_slam(source, config, options);
+}
+
+class EndToEnd : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    if (!std::filesystem::exists(kData / "office_a_static_xyz_150")) GTEST_SKIP() << "../shared data missing";
+  }
+};
+
+TEST_F(EndToEnd, StaticSequenceTracksEveryFrameWithinOneCentimetre) {
+  const RunResult r = run("office_a_static_xyz_150", "static", "off");
+  ASSERT_TRUE(r.completed);
+  EXPECT_EQ(r.stats["lost_frames"].get<int>(), 0);
+  EXPECT_EQ(r.stats["tracked_frames"].get<int>(), 150);
+  ASSERT_TRUE(r.ate_rmse.has_value());
+  EXPECT_LT(*r.ate_rmse, 0.01);
+}
+
+TEST_F(EndToEnd, WalkingSequenceWithOracleCullingStaysAccurate) {
+  const RunResult r = run("office_a_walking_xyz_150", "walking_oracle", "oracle");
+  ASSERT_TRUE(r.completed);
+  ASSERT_TRUE(r.ate_rmse.has_value());
+  EXPECT_LT(*r.ate_rmse, 0.015);
+  // Oracle culling removes the people's features: its recall against the masks must be high.
+  EXPECT_GT(r.stats["culling_score"]["recall"].get<double>(), 0.8);
+}
+
+TEST_F(EndToEnd, DeterministicModeGivesIdenticalTrajectories) {
+  const RunResult a = run("office_a_walking_xyz_150", "det_a", "flow");
+  const RunResult b = run("office_a_walking_xyz_150", "det_b", "flow");
+  const std::string ta =
+      read_file(std::filesystem::path(SP_TEST_TMP_DIR) / "e2e" / "det_a" / "trajectory.txt");
+  const std::string tb =
+      read_file(std::filesystem::path(SP_TEST_TMP_DIR) / "e2e" / "det_b" / "trajectory.txt");
+  ASSERT_FALSE(ta.empty());
+  EXPECT_EQ(ta, tb);
+}
+
+TEST_F(EndToEnd, StopMidRunWritesTheTrajectorySoFarAndShutsDownCleanly) {
+  // A frame source that raises the stop flag after 40 frames, as SIGINT does, with threads running.
+  std::atomic<bool> stop{false};
+  const auto dir = kData / "office_a_static_xyz_150";
+  struct StoppingSource final : io::FrameSource {
+    StoppingSource(const std::filesystem::path& d, std::atomic<bool>& flag) : inner(d), stop(flag) {}
+    std::optional<io::FrameData> next() override {
+      if (++count == 40) stop = true;
+      return inner.next();
+    }
+    [[nodiscard]] std::size_t size_hint() const override { return inner.size_hint(); }
+    [[nodiscard]] const io::CameraConfig& camera() const override { return inner.camera(); }
+    [[nodiscard]] std::size_t skipped_frames() const override { return inner.skipped_frames(); }
+    io::TumSequence inner;
+    std::atomic<bool>& stop;
+    int count = 0;
+  } source(dir, stop);
+  SystemConfig config = SystemConfig::load(kConfig);
+  config.dynamic.mode = "off";
+  RunOptions options;
+  options.out_dir = scratch("stopped");
+  options.progress = false;
+  options.stop = &stop;
+  const RunResult r = run_slam(source, config, options);
+  EXPECT_FALSE(r.completed);
+  const auto trajectory = read_file(options.out_dir / "trajectory.txt");
+  const auto lines = std::count(trajectory.begin(), trajectory.end(), '\n');
+  EXPECT_GE(lines, 39);
+  EXPECT_LE(lines, 41);
+  EXPECT_TRUE(std::filesystem::exists(options.out_dir / "stats.json"));
+}
+
+TEST_F(EndToEnd, ThreadedRunFinishesAndTracksEveryFrame) {
+  const RunResult r = run("office_a_static_xyz_150", "threaded", "off", /*deterministic=*/false);
+  ASSERT_TRUE(r.completed);
+  EXPECT_EQ(r.stats["tracked_frames"].get<int>(), 150);
+  ASSERT_TRUE(r.ate_rmse.has_value());
+  EXPECT_LT(*r.ate_rmse, 0.02);
+}
+
+}  // namespace
+}  // namespace sp::pipeline
