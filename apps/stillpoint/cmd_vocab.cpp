@@ -81,6 +81,10 @@ void evaluate_loops(const std::filesystem::path& seq, const std::filesystem::pat
     sp::Stopwatch sw;
     kf.bow = vocab.transform(desc);
     transform_ms.push_back(sw.elapsed_ms());
+    if (!kfs.empty()) {
+      spdlog::debug("kf {}: {} words, rotation from previous {:.3f} rad", kf.id, kf.bow.size(),
+                    sp::loop::rotation_angle(kfs.back().R_cw, kf.R_cw));
+    }
     kfs.push_back(std::move(kf));
     poses.push_back(it->second);
   }
@@ -117,8 +121,19 @@ void evaluate_loops(const std::filesystem::path& seq, const std::filesystem::pat
         const Pose& b = poses[c.match];
         const bool ok = (a.t_wc - b.t_wc).norm() < 0.5 && a.q_wc.angularDistance(b.q_wc) < 0.5;
         (ok ? good : bad) += 1;
+        spdlog::debug("{} candidate q {} m {} score {:.3f}: {:.2f} m, {:.2f} rad apart", method, c.query,
+                      c.match, c.score, (a.t_wc - b.t_wc).norm(), a.q_wc.angularDistance(b.q_wc));
         if (first == "none") first = std::to_string(kf.id);
       }
+    }
+    for (const auto& c : det->finish(view)) {
+      const Pose& a = poses[c.query];
+      const Pose& b = poses[c.match];
+      const bool ok = (a.t_wc - b.t_wc).norm() < 0.5 && a.q_wc.angularDistance(b.q_wc) < 0.5;
+      (ok ? good : bad) += 1;
+      spdlog::debug("{} final candidate q {} m {}: {:.2f} m apart", method, c.query, c.match,
+                    (a.t_wc - b.t_wc).norm());
+      if (first == "none") first = "end";
     }
     const auto st = det->stats();
     const auto sum = sp::summarize(ms);

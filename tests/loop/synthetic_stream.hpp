@@ -89,6 +89,8 @@ inline RunResult run(LoopDetector& det, const Stream& s) {
     const auto c = det.detect(kf, view);
     r.candidates.insert(r.candidates.end(), c.begin(), c.end());
   }
+  const auto c = det.finish(view);
+  r.candidates.insert(r.candidates.end(), c.begin(), c.end());
   r.stats = det.stats();
   return r;
 }

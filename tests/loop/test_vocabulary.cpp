@@ -297,7 +297,8 @@ TEST(VocabularyParams, ReadsAndChecksYaml) {
   r.finish();
   EXPECT_EQ(p.k, 8);
   EXPECT_EQ(p.levels, 6);
-  EXPECT_THROW(VocabularyParams::from_yaml(sp::ConfigReader::from_string("k: 1\n", "bad.yaml")), sp::ConfigError);
+  EXPECT_THROW(VocabularyParams::from_yaml(sp::ConfigReader::from_string("k: 1\n", "bad.yaml")),
+               sp::ConfigError);
   VocabularyParams bad;
   bad.levels = 0;
   EXPECT_THROW(Vocabulary::train({cv::Mat(4, 32, CV_8U, cv::Scalar(1))}, bad, 1), sp::Error);

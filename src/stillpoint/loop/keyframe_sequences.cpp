@@ -1,5 +1,7 @@
 #include "stillpoint/loop/keyframe_sequences.hpp"
 
+#include <spdlog/spdlog.h>
+
 #include <Eigen/Core>
 #include <algorithm>
 #include <cmath>
@@ -80,16 +82,35 @@ SequenceLoopDetector::SequenceLoopDetector(const LoopDetectorParams& params)
   params_.validate();
 }
 
+std::optional<KeyframeSequence> SequenceLoopDetector::record(std::optional<KeyframeSequence> closed) {
+  if (!closed) return closed;
+  if (sequences_.size() != closed->id) throw sp::Error("SequenceLoopDetector: sequence ids out of order");
+  sequences_.push_back(*closed);
+  if (closed->keyframes.size() < static_cast<std::size_t>(params_.sequence.min_length)) closed.reset();
+  return closed;
+}
+
 std::optional<KeyframeSequence> SequenceLoopDetector::file_keyframe(const KeyframeInfo& kf) {
   keyframe_bow_[kf.id] = kf.bow;
   std::optional<KeyframeSequence> closed = segmenter_.add(kf.id, kf.R_cw, kf.bow);
   sequence_of_[kf.id] = segmenter_.open_id();
-  if (closed) {
-    if (sequences_.size() != closed->id) throw sp::Error("SequenceLoopDetector: sequence ids out of order");
-    sequences_.push_back(*closed);
-    if (closed->keyframes.size() < static_cast<std::size_t>(params_.sequence.min_length)) closed.reset();
-  }
-  return closed;
+  return record(std::move(closed));
+}
+
+std::vector<LoopCandidate> SequenceLoopDetector::query_and_file(const KeyframeSequence& seq,
+                                                                const CovisibilityView& view) {
+  std::vector<LoopCandidate> out = query_sequence(seq, view);
+  seq_db_.add(seq.id, seq.bow);
+  filed_.push_back(seq.id);
+  stats_.candidates += out.size();
+  return out;
+}
+
+std::vector<LoopCandidate> SequenceLoopDetector::finish(const CovisibilityView& view) {
+  std::lock_guard lock(mutex_);
+  std::optional<KeyframeSequence> closed = record(segmenter_.flush());
+  if (!closed) return {};
+  return query_and_file(*closed, view);
 }
 
 void SequenceLoopDetector::add_keyframe(const KeyframeInfo& kf) {
@@ -130,11 +151,7 @@ std::vector<LoopCandidate> SequenceLoopDetector::detect(const KeyframeInfo& quer
   ++stats_.keyframes;
   std::optional<KeyframeSequence> closed = file_keyframe(query);
   if (!closed) return {};
-  std::vector<LoopCandidate> out = query_sequence(*closed, view);
-  seq_db_.add(closed->id, closed->bow);
-  filed_.push_back(closed->id);
-  stats_.candidates += out.size();
-  return out;
+  return query_and_file(*closed, view);
 }
 
 std::vector<LoopCandidate> SequenceLoopDetector::query_sequence(const KeyframeSequence& seq,
@@ -222,6 +239,10 @@ std::vector<LoopCandidate> SequenceLoopDetector::query_sequence(const KeyframeSe
     pairs.push_back(best);
   }
   const std::vector<bool> accepted = consistency_.update(candidate_groups);
+  spdlog::debug(
+      "sequence {} ({} kf): {} neighbours, min score {:.3f}, {} hits, best {} ({:.3f}), {} groups kept",
+      seq.id, seq.keyframes.size(), neighbours.size(), any ? min_score : -1.0, hits.size(),
+      hits.empty() ? -1 : static_cast<long>(hits[0].id), hits.empty() ? 0.0 : hits[0].score, kept.size());
   std::vector<LoopCandidate> out;
   for (std::size_t i = 0; i < pairs.size(); ++i) {
     if (accepted[i]) out.push_back(pairs[i]);

@@ -32,8 +32,10 @@ struct SequenceParams {
   int max_length = 15;          // L_T: keyframes per sequence at most [count], 1..1000
   int min_length = 2;           // shorter sequences never close a loop [count], 1..1000
   bool angle_to_first = false;  // measure θ against the sequence's first keyframe, not the previous one
-  int min_consistency = 2;      // consecutive query sequences a candidate group must persist [count], 1..20
-  int exclude_recent = 1;       // the last N filed sequences are never candidates [count], 0..100
+  // Consecutive query sequences a candidate group must persist [count], 1..20. 1: a sequence already
+  // pools up to L_T keyframes of evidence, and each extra sequence delays a loop by up to L_T keyframes.
+  int min_consistency = 1;
+  int exclude_recent = 1;  // the last N filed sequences are never candidates [count], 0..100
 
   static SequenceParams from_yaml(const sp::ConfigReader& r);
   void validate() const;  // throws sp::Error

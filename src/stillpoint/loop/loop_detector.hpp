@@ -56,6 +56,9 @@ class LoopDetector {
   virtual void erase_keyframe(KeyframeId id) = 0;
   // Candidates for `query` (best first), then files `query`. Keyframes must arrive in creation order.
   virtual std::vector<LoopCandidate> detect(const KeyframeInfo& query, const CovisibilityView& view) = 0;
+  // End of the run: queries what is still pending (the open keyframe sequence), so a loop closed by
+  // the last keyframes is not lost. Per-keyframe detection has nothing pending.
+  virtual std::vector<LoopCandidate> finish(const CovisibilityView& view) = 0;
   [[nodiscard]] virtual std::size_t queries() const = 0;
   [[nodiscard]] virtual DetectorStats stats() const = 0;
   [[nodiscard]] virtual std::string name() const = 0;
@@ -102,6 +105,7 @@ class KeyframeLoopDetector final : public LoopDetector {
   void add_keyframe(const KeyframeInfo& kf) override;
   void erase_keyframe(KeyframeId id) override;
   std::vector<LoopCandidate> detect(const KeyframeInfo& query, const CovisibilityView& view) override;
+  std::vector<LoopCandidate> finish(const CovisibilityView&) override { return {}; }
   [[nodiscard]] std::size_t queries() const override;
   [[nodiscard]] DetectorStats stats() const override;
   [[nodiscard]] std::string name() const override { return "bow-keyframe"; }
@@ -121,6 +125,7 @@ class SequenceLoopDetector final : public LoopDetector {
   void add_keyframe(const KeyframeInfo& kf) override;
   void erase_keyframe(KeyframeId id) override;
   std::vector<LoopCandidate> detect(const KeyframeInfo& query, const CovisibilityView& view) override;
+  std::vector<LoopCandidate> finish(const CovisibilityView& view) override;
   [[nodiscard]] std::size_t queries() const override;
   [[nodiscard]] DetectorStats stats() const override;
   [[nodiscard]] std::string name() const override { return "bow-sequence"; }
@@ -130,6 +135,10 @@ class SequenceLoopDetector final : public LoopDetector {
  private:
   // Files the keyframe; returns the sequence it closed, if any (mutex held).
   std::optional<KeyframeSequence> file_keyframe(const KeyframeInfo& kf);
+  // Records a closed sequence; returns it when it is long enough to be queried and filed.
+  std::optional<KeyframeSequence> record(std::optional<KeyframeSequence> closed);
+  // Queries a closed sequence, then files it (mutex held).
+  std::vector<LoopCandidate> query_and_file(const KeyframeSequence& seq, const CovisibilityView& view);
   std::vector<LoopCandidate> query_sequence(const KeyframeSequence& seq, const CovisibilityView& view);
 
   LoopDetectorParams params_;
