@@ -50,7 +50,7 @@ torch::Tensor load_images(const std::vector<PlaceImage>& imgs, int h, int w, boo
   for (size_t i = 0; i < imgs.size(); ++i) {
     const cv::Mat bgr = cv::imread(imgs[i].file.string(), cv::IMREAD_COLOR);
     if (bgr.empty()) throw sp::InputError(imgs[i].file.string(), 0, "cannot read image");
-    // image_to_tensor gives the normalised tensor; undo nothing, just reuse its resize + RGB path.
+    // Same resize and colour order as image_to_tensor(); normalisation happens per batch.
     cv::Mat small;
     cv::resize(bgr, small, cv::Size(w, h), 0, 0, cv::INTER_AREA);
     cv::cvtColor(small, small, cv::COLOR_BGR2RGB);
