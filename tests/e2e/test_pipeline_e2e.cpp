@@ -44,6 +44,7 @@ RunResult run(const std::string& sequence, const std::string& out_name, const st
   options.boxes_file = dir / "boxes.txt";
   options.masks_dir = dir / "masks";
   options.stop = stop;
+  options.project_root = SP_SOURCE_DIR;
   return run_slam(source, config, options);
 }
 
@@ -68,8 +69,10 @@ TEST_F(EndToEnd, WalkingSequenceWithOracleCullingStaysAccurate) {
   ASSERT_TRUE(r.completed);
   ASSERT_TRUE(r.ate_rmse.has_value());
   EXPECT_LT(*r.ate_rmse, 0.015);
-  // Oracle culling removes the people's features: its recall against the masks must be high.
-  EXPECT_GT(r.stats["culling_score"]["recall"].get<double>(), 0.8);
+  // Oracle culling removes the features of the people flagged moving; the masks also cover people
+  // standing still, which stay (they are static), so recall against the masks is well below 1.
+  EXPECT_GT(r.stats["culling_score"]["recall"].get<double>(), 0.5);
+  EXPECT_GT(r.stats["culling_score"]["culled_keypoints"].get<int>(), 1000);
 }
 
 TEST_F(EndToEnd, DeterministicModeGivesIdenticalTrajectories) {
@@ -106,6 +109,7 @@ TEST_F(EndToEnd, StopMidRunWritesTheTrajectorySoFarAndShutsDownCleanly) {
   options.out_dir = scratch("stopped");
   options.progress = false;
   options.stop = &stop;
+  options.project_root = SP_SOURCE_DIR;
   const RunResult r = run_slam(source, config, options);
   EXPECT_FALSE(r.completed);
   const auto trajectory = read_file(options.out_dir / "trajectory.txt");

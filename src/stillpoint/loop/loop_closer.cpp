@@ -73,6 +73,27 @@ void LoopCloser::finish() {
   if (global_ba_thread_.joinable()) global_ba_thread_.join();
 }
 
+void LoopCloser::flush() {
+  if (!detector_) return;
+  // The last open keyframe sequence is only queried now (a path that ends where it started).
+  Stopwatch watch;
+  const MapCovisibility covisibility(map_);
+  const auto candidates = detector_->finish(covisibility);
+  {
+    std::lock_guard lock(stats_mutex_);
+    stats_.detection_ms_total += watch.elapsed_ms();
+    stats_.candidates += candidates.size();
+  }
+  map::KeyframeId last = 0;
+  {
+    map::MapView view = map_.view();
+    const auto ids = view.keyframe_ids_sorted();
+    if (!ids.empty()) last = ids.back();
+  }
+  handle_candidates(candidates, last);
+  finish();
+}
+
 LoopClosingStats LoopCloser::stats() const {
   std::lock_guard lock(stats_mutex_);
   LoopClosingStats s = stats_;
@@ -114,6 +135,10 @@ void LoopCloser::process(map::KeyframeId kid) {
     map::MapView view = map_.view();
     if (map::Keyframe* kf = view.keyframe(kid)) kf->protected_from_culling = false;
   }
+  handle_candidates(candidates, kid);
+}
+
+void LoopCloser::handle_candidates(const std::vector<LoopCandidate>& candidates, map::KeyframeId kid) {
   for (const LoopCandidate& c : candidates) {
     const auto verified = verify(c.query, c.match);
     if (!verified) continue;

@@ -54,7 +54,10 @@ class LoopCloser {
 
   // Handles one new keyframe (called in keyframe order by the loop-closing stage).
   void process(map::KeyframeId keyframe);
-  // Waits for a running global BA (end of run).
+  // End of run: queries what the detector still holds (the open sequence), then waits for a
+  // running global BA.
+  void flush();
+  // Waits for a running global BA.
   void finish();
   [[nodiscard]] LoopClosingStats stats() const;
   [[nodiscard]] bool enabled() const { return detector_ != nullptr; }
@@ -64,6 +67,7 @@ class LoopCloser {
     geo::SE3 T_query_w;  // corrected pose of the query keyframe
     int inliers = 0;
   };
+  void handle_candidates(const std::vector<LoopCandidate>& candidates, map::KeyframeId kid);
   std::optional<Verified> verify(map::KeyframeId query, map::KeyframeId match);
   void correct(map::KeyframeId query, map::KeyframeId match, const geo::SE3& T_query_w);
   void start_global_ba(std::uint64_t changes_at_start);

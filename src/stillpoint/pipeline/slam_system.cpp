@@ -92,7 +92,7 @@ void SlamSystem::finish() {
   finished_ = true;
   mapping_stage_->stop();  // drains into the loop stage
   if (loop_stage_) loop_stage_->stop();
-  if (closer_) closer_->finish();
+  if (closer_) closer_->flush();
 }
 
 std::vector<io::StampedPose> SlamSystem::trajectory() {
