@@ -1,0 +1,332 @@
+// Fault injection: ~60 frames of the shared static dynsynth sequence copied into a scratch folder,
+// one fault injected per test, the whole system run (deterministic, no dynamic culling). The run must
+// go on where it can (skipping and reporting broken frames), write the trajectory of most frames,
+// keep tracking or relocalise after gaps and unusable frames, and stop with an error naming the file
+// and line only where the input cannot be read at all.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <set>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "stillpoint/common/error.hpp"
+#include "stillpoint/io/fake_source.hpp"
+#include "stillpoint/io/openni2_source.hpp"
+#include "stillpoint/io/trajectory_io.hpp"
+#include "stillpoint/io/tum_sequence.hpp"
+#include "stillpoint/io/tum_text.hpp"
+#include "stillpoint/pipeline/runner.hpp"
+
+namespace sp::pipeline {
+namespace {
+
+namespace fs = std::filesystem;
+
+const fs::path kSource = fs::path(SP_SHARED_DIR) / "data" / "dynsynth" / "office_a_static_xyz_150";
+const fs::path kConfig = fs::path(SP_SOURCE_DIR) / "config" / "stillpoint.yaml";
+
+struct Frame {
+  std::string rgb_stamp, rgb, depth_stamp, depth;  // as listed in associations.txt
+};
+
+std::vector<Frame> source_frames() {
+  std::vector<Frame> out;
+  for (const auto& rec : io::read_tum_text(kSource / "associations.txt", 4)) {
+    out.push_back({rec.columns[0], rec.columns[1], rec.columns[2], rec.columns[3]});
+  }
+  return out;
+}
+
+// A sequence folder holding `frames` (copied), with rgb.txt and depth.txt (no associations.txt, so the
+// lists themselves are read and associated), camera.yaml and groundtruth.txt.
+class Sequence {
+ public:
+  Sequence(const std::string& name, const std::vector<Frame>& frames)
+      : dir_(fs::path(SP_TEST_TMP_DIR) / "faults" / name), frames_(frames) {
+    fs::remove_all(dir_);
+    fs::create_directories(dir_ / "rgb");
+    fs::create_directories(dir_ / "depth");
+    for (const auto& f : frames_) {
+      fs::copy_file(kSource / f.rgb, dir_ / f.rgb);
+      fs::copy_file(kSource / f.depth, dir_ / f.depth);
+    }
+    fs::copy_file(kSource / "camera.yaml", dir_ / "camera.yaml");
+    fs::copy_file(kSource / "groundtruth.txt", dir_ / "groundtruth.txt");
+    write_lists();
+  }
+  // Rewrites rgb.txt and depth.txt; `rgb_lines` replaces the rgb.txt body when given.
+  void write_lists(const std::vector<std::string>& rgb_lines = {}) const {
+    std::ofstream rgb(dir_ / "rgb.txt");
+    std::ofstream depth(dir_ / "depth.txt");
+    rgb << "# color images\n# timestamp filename\n";
+    depth << "# depth maps\n# timestamp filename\n";
+    if (rgb_lines.empty()) {
+      for (const auto& f : frames_) rgb << f.rgb_stamp << " " << f.rgb << "\n";
+    } else {
+      for (const auto& l : rgb_lines) rgb << l << "\n";
+    }
+    for (const auto& f : frames_) depth << f.depth_stamp << " " << f.depth << "\n";
+  }
+  [[nodiscard]] fs::path rgb(std::size_t i) const { return dir_ / frames_.at(i).rgb; }
+  [[nodiscard]] fs::path depth(std::size_t i) const { return dir_ / frames_.at(i).depth; }
+  [[nodiscard]] const std::vector<Frame>& frames() const { return frames_; }
+  [[nodiscard]] const fs::path& dir() const { return dir_; }
+
+ private:
+  fs::path dir_;
+  std::vector<Frame> frames_;
+};
+
+struct Outcome {
+  RunResult result;
+  std::vector<double> stamps;  // tracked frames, from trajectory.txt
+  [[nodiscard]] int skipped() const { return result.stats["skipped_frames"].get<int>(); }
+  [[nodiscard]] int frames() const { return result.stats["frames"].get<int>(); }
+  [[nodiscard]] bool tracked(const std::string& stamp) const {
+    const double t = std::stod(stamp);
+    for (double s : stamps) {
+      if (std::abs(s - t) < 1e-5) return true;
+    }
+    return false;
+  }
+  // How many of frames [from, to) of `seq` appear in the trajectory.
+  [[nodiscard]] std::size_t tracked_in(const Sequence& seq, std::size_t from, std::size_t to) const {
+    std::size_t n = 0;
+    for (std::size_t i = from; i < to; ++i) n += tracked(seq.frames()[i].rgb_stamp) ? 1 : 0;
+    return n;
+  }
+};
+
+Outcome run_source(io::FrameSource& source, const std::string& name, const std::optional<fs::path>& gt) {
+  SystemConfig config = SystemConfig::load(kConfig);
+  config.dynamic.mode = "off";
+  RunOptions options;
+  options.out_dir = fs::path(SP_TEST_TMP_DIR) / "faults" / (name + "_out");
+  fs::remove_all(options.out_dir);
+  options.deterministic = true;
+  options.progress = false;
+  options.groundtruth = gt;
+  options.project_root = SP_SOURCE_DIR;
+  Outcome o;
+  o.result = run_slam(source, config, options);
+  EXPECT_TRUE(fs::exists(options.out_dir / "stats.json"));
+  const fs::path traj = options.out_dir / "trajectory.txt";
+  EXPECT_TRUE(fs::exists(traj));
+  for (const auto& p : io::read_tum_trajectory(traj)) o.stamps.push_back(p.stamp);
+  return o;
+}
+
+Outcome run(const Sequence& seq) {
+  io::TumSequence source(seq.dir());
+  return run_source(source, seq.dir().filename().string(), source.groundtruth_path());
+}
+
+class Faults : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    if (!fs::exists(kSource / "associations.txt")) GTEST_SKIP() << "../shared data missing";
+    all_ = source_frames();
+    ASSERT_GE(all_.size(), 150u);
+  }
+  [[nodiscard]] std::vector<Frame> first(std::size_t n) const { return {all_.begin(), all_.begin() + n}; }
+  std::vector<Frame> all_;
+};
+
+void truncate_file(const fs::path& p, double keep_fraction) {
+  const auto size = fs::file_size(p);
+  fs::resize_file(p, static_cast<std::uintmax_t>(static_cast<double>(size) * keep_fraction));
+}
+
+TEST_F(Faults, CleanRunTracksEveryFrame) {  // the baseline the faults are measured against
+  const Sequence seq("clean", first(60));
+  const Outcome o = run(seq);
+  EXPECT_TRUE(o.result.completed);
+  EXPECT_EQ(o.skipped(), 0);
+  EXPECT_EQ(o.stamps.size(), 60u);
+  ASSERT_TRUE(o.result.ate_rmse.has_value());
+  EXPECT_LT(*o.result.ate_rmse, 0.02);
+}
+
+TEST_F(Faults, MissingImageFilesAreSkippedAndReported) {
+  const Sequence seq("missing", first(60));
+  fs::remove(seq.rgb(20));
+  fs::remove(seq.depth(40));
+  const Outcome o = run(seq);
+  EXPECT_TRUE(o.result.completed);
+  EXPECT_EQ(o.skipped(), 2);
+  EXPECT_EQ(o.frames(), 58);
+  EXPECT_FALSE(o.tracked(seq.frames()[20].rgb_stamp));
+  EXPECT_GE(o.stamps.size(), 55u);
+  EXPECT_TRUE(o.tracked(seq.frames().back().rgb_stamp));
+}
+
+TEST_F(Faults, TruncatedImagesAreSkippedOrSurvived) {
+  const Sequence seq("truncated", first(60));
+  truncate_file(seq.depth(25), 0.5);  // a PNG cut in half: libpng fails, the frame is skipped
+  truncate_file(seq.depth(26), 0.0);  // an empty file
+  truncate_file(seq.rgb(35), 0.3);    // a JPEG cut short: decodes partly (grey bottom) or fails
+  const Outcome o = run(seq);
+  EXPECT_TRUE(o.result.completed);
+  EXPECT_GE(o.skipped(), 2);
+  EXPECT_LE(o.skipped(), 3);
+  EXPECT_FALSE(o.tracked(seq.frames()[25].rgb_stamp));
+  EXPECT_GE(o.stamps.size(), 54u);
+  EXPECT_TRUE(o.tracked(seq.frames().back().rgb_stamp));
+}
+
+TEST_F(Faults, DepthOfTheWrongSizeOrTypeIsSkipped) {
+  const Sequence seq("depth_size", first(60));
+  cv::imwrite(seq.depth(20).string(), cv::Mat(240, 320, CV_16UC1, cv::Scalar(10000)));
+  cv::imwrite(seq.depth(30).string(), cv::Mat(480, 640, CV_8UC1, cv::Scalar(200)));  // 8-bit depth
+  const Outcome o = run(seq);
+  EXPECT_TRUE(o.result.completed);
+  EXPECT_EQ(o.skipped(), 2);
+  EXPECT_FALSE(o.tracked(seq.frames()[20].rgb_stamp));
+  EXPECT_FALSE(o.tracked(seq.frames()[30].rgb_stamp));
+  EXPECT_GE(o.stamps.size(), 56u);
+}
+
+TEST_F(Faults, AllZeroDepthDoesNotStopTracking) {
+  const Sequence seq("zero_depth", first(60));
+  for (std::size_t i : {30u, 31u})
+    cv::imwrite(seq.depth(i).string(), cv::Mat(480, 640, CV_16UC1, cv::Scalar(0)));
+  const Outcome o = run(seq);
+  EXPECT_TRUE(o.result.completed);
+  EXPECT_EQ(o.skipped(), 0);
+  EXPECT_EQ(o.frames(), 60);
+  EXPECT_GE(o.tracked_in(seq, 32, 60), 26u);  // tracking goes on after the frames without depth
+  EXPECT_GE(o.stamps.size(), 56u);
+}
+
+TEST_F(Faults, BlackFramesAreSurvived) {
+  const Sequence seq("black", first(60));
+  for (std::size_t i : {30u, 31u, 32u})
+    cv::imwrite(seq.rgb(i).string(), cv::Mat(480, 640, CV_8UC3, cv::Scalar(0)));
+  const Outcome o = run(seq);
+  EXPECT_TRUE(o.result.completed);
+  EXPECT_EQ(o.frames(), 60);
+  EXPECT_GE(o.tracked_in(seq, 0, 30), 30u);
+  EXPECT_GE(o.tracked_in(seq, 33, 60), 25u);  // relocalised or kept tracking after the black frames
+  EXPECT_TRUE(o.tracked(seq.frames().back().rgb_stamp));
+  ASSERT_TRUE(o.result.ate_rmse.has_value());
+  EXPECT_LT(*o.result.ate_rmse, 0.05);
+}
+
+TEST_F(Faults, NoiseFrameIsSurvived) {
+  const Sequence seq("noise", first(60));
+  cv::Mat noise(480, 640, CV_8UC3);
+  cv::RNG rng(7);
+  rng.fill(noise, cv::RNG::UNIFORM, cv::Scalar::all(0), cv::Scalar::all(256));
+  cv::imwrite(seq.rgb(30).string(), noise);
+  const Outcome o = run(seq);
+  EXPECT_TRUE(o.result.completed);
+  EXPECT_EQ(o.frames(), 60);
+  EXPECT_GE(o.tracked_in(seq, 31, 60), 27u);
+  EXPECT_TRUE(o.tracked(seq.frames().back().rgb_stamp));
+  ASSERT_TRUE(o.result.ate_rmse.has_value());
+  EXPECT_LT(*o.result.ate_rmse, 0.05);
+}
+
+TEST_F(Faults, TwoSecondGapIsBridged) {
+  std::vector<Frame> frames = first(30);
+  frames.insert(frames.end(), all_.begin() + 90, all_.begin() + 150);  // frames 30..89 (2 s) missing
+  const Sequence seq("gap", frames);
+  const Outcome o = run(seq);
+  EXPECT_TRUE(o.result.completed);
+  EXPECT_EQ(o.frames(), 90);
+  EXPECT_GE(o.tracked_in(seq, 0, 30), 30u);
+  EXPECT_GE(o.tracked_in(seq, 30, 90), 50u);  // relocalised (or re-tracked) after the gap
+  EXPECT_TRUE(o.tracked(seq.frames().back().rgb_stamp));
+  ASSERT_TRUE(o.result.ate_rmse.has_value());
+  EXPECT_LT(*o.result.ate_rmse, 0.05);
+}
+
+// Timestamps that do not increase cannot be associated: the sequence is refused before the run, with
+// the file and line.
+void expect_refused(const Sequence& seq, int line, const std::string& what) {
+  try {
+    io::TumSequence source(seq.dir());
+    FAIL() << "the sequence was accepted";
+  } catch (const InputError& e) {
+    EXPECT_EQ(fs::path(e.file()).filename(), "rgb.txt") << e.what();
+    EXPECT_EQ(e.line(), line) << e.what();
+    const std::string msg = e.what();
+    EXPECT_NE(msg.find("rgb.txt:" + std::to_string(line) + ":"), std::string::npos) << msg;
+    EXPECT_NE(msg.find(what), std::string::npos) << msg;
+  }
+}
+
+TEST_F(Faults, DuplicatedTimestampIsAnInputErrorNamingFileAndLine) {
+  const Sequence seq("dup_stamp", first(60));
+  std::vector<std::string> lines;
+  for (const auto& f : seq.frames()) lines.push_back(f.rgb_stamp + " " + f.rgb);
+  lines.insert(lines.begin() + 11, lines[10]);  // frame 10 listed twice: file lines 13 and 14
+  seq.write_lists(lines);
+  expect_refused(seq, 14, "timestamps must increase");
+}
+
+TEST_F(Faults, OutOfOrderTimestampIsAnInputErrorNamingFileAndLine) {
+  const Sequence seq("order_stamp", first(60));
+  std::vector<std::string> lines;
+  for (const auto& f : seq.frames()) lines.push_back(f.rgb_stamp + " " + f.rgb);
+  std::swap(lines[20], lines[21]);  // file lines 23 and 24: line 24 goes back in time
+  seq.write_lists(lines);
+  expect_refused(seq, 24, "is not after the previous one");
+}
+
+TEST_F(Faults, GarbageLineIsAnInputErrorNamingFileAndLine) {
+  const Sequence seq("garbage_line", first(10));
+  std::vector<std::string> lines;
+  for (const auto& f : seq.frames()) lines.push_back(f.rgb_stamp + " " + f.rgb);
+  lines[4] = "\x89PNG\x01\x02 rgb/x.jpg";
+  seq.write_lists(lines);
+  expect_refused(seq, 7, "is not a number");
+}
+
+TEST_F(Faults, EveryImageUnreadableEndsCleanlyWithAnEmptyTrajectory) {
+  const Sequence seq("all_missing", first(10));
+  for (std::size_t i = 0; i < 10; ++i) fs::remove(seq.rgb(i));
+  const Outcome o = run(seq);
+  EXPECT_EQ(o.skipped(), 10);
+  EXPECT_EQ(o.frames(), 0);
+  EXPECT_TRUE(o.stamps.empty());
+}
+
+// The live-camera path without a camera: the sequence's images turned into what OpenNI2 delivers
+// (RGB888, depth in millimetres, device microseconds), paired, converted and served by FakeSource.
+TEST_F(Faults, CameraConversionPathTracksLikeTheFiles) {
+  const Sequence seq("camera_path", first(40));
+  io::TumSequence files(seq.dir());
+  io::FakeSource camera(files.camera());
+  io::TimestampPairer pairer(0.02);
+  io::CameraConfig cam = files.camera();
+  while (auto f = files.next()) {
+    io::RawColourFrame c;
+    c.timestamp_us = static_cast<std::uint64_t>(std::llround(f->stamp * 1e6));
+    cv::cvtColor(f->bgr, c.rgb, cv::COLOR_BGR2RGB);
+    io::RawDepthFrame d;
+    d.timestamp_us = static_cast<std::uint64_t>(std::llround(f->depth_stamp * 1e6));
+    f->depth.convertTo(d.depth, CV_16U, 1000.0);
+    pairer.add_depth(std::move(d));
+    pairer.add_colour(std::move(c));
+    while (auto pr = pairer.pop_pair()) {
+      camera.push(io::convert_openni_frames(pr->first, pr->second, cam, camera.size_hint()));
+    }
+  }
+  ASSERT_EQ(camera.size_hint(), 40u);
+  EXPECT_EQ(pairer.dropped(), 0u);
+  const Outcome o = run_source(camera, "camera_path", files.groundtruth_path());
+  EXPECT_TRUE(o.result.completed);
+  EXPECT_EQ(o.stamps.size(), 40u);
+  ASSERT_TRUE(o.result.ate_rmse.has_value());
+  EXPECT_LT(*o.result.ate_rmse, 0.02);
+}
+
+}  // namespace
+}  // namespace sp::pipeline
