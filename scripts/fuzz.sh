@@ -1,0 +1,51 @@
+#!/usr/bin/env bash
+# Builds the libFuzzer targets in fuzz/ with clang (ASan + UBSan) and runs each for SECONDS (default 10).
+#   scripts/fuzz.sh [seconds] [target ...]
+# Environment: BUILD_DIR (default build-fuzz), JOBS (default 1), NICE (default 19).
+# Seeds come from fuzz/corpus/<target>/ (committed, small); what the fuzzer finds goes to
+# $BUILD_DIR/corpus/<target>/ and crashes to $BUILD_DIR/crashes/<target>/ (reproduce with
+# `$BUILD_DIR/<target> <crash-file>`). Exit status 1 when any target crashed.
+set -euo pipefail
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+SECONDS_EACH="${1:-10}"
+shift || true
+BUILD_DIR="${BUILD_DIR:-$ROOT/build-fuzz}"
+JOBS="${JOBS:-1}"
+NICE="${NICE:-19}"
+TARGETS=("$@")
+if [ ${#TARGETS[@]} -eq 0 ]; then
+  TARGETS=(fuzz_tum_text fuzz_trajectory fuzz_config fuzz_vocabulary fuzz_boxes)
+fi
+
+command -v clang++ >/dev/null || { echo "clang++ not found: apt-get install clang libclang-rt-14-dev" >&2; exit 2; }
+GEN=()
+command -v ninja >/dev/null && GEN=(-G Ninja)
+CC=clang CXX=clang++ cmake -S "$ROOT/fuzz" -B "$BUILD_DIR" "${GEN[@]}" >/dev/null
+nice -n "$NICE" cmake --build "$BUILD_DIR" -j "$JOBS" --target "${TARGETS[@]}"
+
+status=0
+printf '%-18s %12s %10s %8s %s\n' target executions exec/s crashes result
+for t in "${TARGETS[@]}"; do
+  work="$BUILD_DIR/corpus/$t"
+  crashes="$BUILD_DIR/crashes/$t"
+  mkdir -p "$work" "$crashes"
+  log="$BUILD_DIR/$t.log"
+  set +e
+  # -rss_limit_mb / -malloc_limit_mb: a parser that allocates what a header claims is a finding.
+  nice -n "$NICE" "$BUILD_DIR/$t" "$work" "$ROOT/fuzz/corpus/$t" -max_total_time="$SECONDS_EACH" \
+    -print_final_stats=1 -rss_limit_mb=2048 -malloc_limit_mb=1024 -timeout=10 \
+    -artifact_prefix="$crashes/" >"$log" 2>&1
+  rc=$?
+  set -e
+  execs=$(grep -o 'stat::number_of_executed_units: *[0-9]*' "$log" | grep -o '[0-9]*$' || echo "?")
+  speed=$(grep -o 'stat::average_exec_per_sec: *[0-9]*' "$log" | grep -o '[0-9]*$' || echo "?")
+  found=$(find "$crashes" -type f | wc -l)
+  if [ "$rc" -ne 0 ] || [ "$found" -ne 0 ]; then
+    result="FAILED (rc $rc, see $log)"
+    status=1
+  else
+    result=ok
+  fi
+  printf '%-18s %12s %10s %8s %s\n' "$t" "$execs" "$speed" "$found" "$result"
+done
+exit $status
