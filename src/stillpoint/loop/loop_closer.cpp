@@ -103,9 +103,9 @@ LoopClosingStats LoopCloser::stats() const {
 
 void LoopCloser::process(map::KeyframeId kid) {
   if (!detector_) return;
-  Stopwatch watch;
   KeyframeInfo info;
   std::size_t keyframes = 0;
+  cv::Mat descriptors;
   {
     map::MapView view = map_.view();
     const map::Keyframe* kf = view.keyframe(kid);
@@ -113,12 +113,16 @@ void LoopCloser::process(map::KeyframeId kid) {
     info.id = kid;
     info.R_cw = kf->T_cw.rotation();
     keyframes = view.live_keyframes();
-    const cv::Mat descriptors = kf->features.descriptors.clone();
-    view.keyframe(kid)->protected_from_culling = true;  // until detection is done with it
-    info.bow = vocabulary_->transform(descriptors);
+    descriptors = kf->features.descriptors.clone();
   }
+  // The BoW vector is the keyframe's description, shared by every detector (ORB-SLAM computes it in
+  // local mapping); it is timed apart from detection, which is the database search itself.
+  Stopwatch bow_watch;
+  info.bow = vocabulary_->transform(descriptors);
+  const double bow_ms = bow_watch.elapsed_ms();
   std::vector<LoopCandidate> candidates;
   const MapCovisibility covisibility(map_);
+  Stopwatch watch;
   // Right after a loop, or on a small map, the keyframe is only filed.
   if (keyframes < config_.min_keyframes || (last_loop_keyframe_ != 0 && kid < last_loop_keyframe_ + 10)) {
     detector_->add_keyframe(info);
@@ -129,11 +133,8 @@ void LoopCloser::process(map::KeyframeId kid) {
     std::lock_guard lock(stats_mutex_);
     stats_.keyframes++;
     stats_.detection_ms_total += watch.elapsed_ms();
+    stats_.bow_ms_total += bow_ms;
     stats_.candidates += candidates.size();
-  }
-  {
-    map::MapView view = map_.view();
-    if (map::Keyframe* kf = view.keyframe(kid)) kf->protected_from_culling = false;
   }
   handle_candidates(candidates, kid);
 }

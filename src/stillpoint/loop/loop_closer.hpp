@@ -37,7 +37,8 @@ struct LoopClosingStats {
   std::size_t loops_detected = 0;  // candidates that passed geometric verification
   std::size_t loops_closed = 0;    // corrections applied
   std::size_t queries = 0;         // database queries made by the detector
-  double detection_ms_total = 0;   // BoW conversion + candidate search (not verification)
+  double detection_ms_total = 0;   // candidate search in the database (not BoW, not verification)
+  double bow_ms_total = 0;         // BoW conversion of the keyframes
   double correction_ms_total = 0;
   std::size_t global_ba_runs = 0;
   std::size_t global_ba_aborted = 0;

@@ -144,6 +144,7 @@ nlohmann::json SlamSystem::statistics() {
     j["loop_candidates"] = ls.candidates;
     j["loop_queries"] = ls.queries;
     j["loop_detection_ms_total"] = ls.detection_ms_total;
+    j["loop_bow_ms_total"] = ls.bow_ms_total;
     j["loop_correction_ms_total"] = ls.correction_ms_total;
     j["global_ba_runs"] = ls.global_ba_runs;
     j["vocabulary_words"] = vocabulary_words_;
