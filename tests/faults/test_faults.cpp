@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <opencv2/imgcodecs.hpp>
@@ -58,6 +59,10 @@ class Sequence {
     }
     fs::copy_file(kSource / "camera.yaml", dir_ / "camera.yaml");
     fs::copy_file(kSource / "groundtruth.txt", dir_ / "groundtruth.txt");
+    // The shared data is read-only; the copies must take the injected faults.
+    for (const auto& e : fs::recursive_directory_iterator(dir_)) {
+      fs::permissions(e.path(), fs::perms::owner_read | fs::perms::owner_write, fs::perm_options::add);
+    }
     write_lists();
   }
   // Rewrites rgb.txt and depth.txt; `rgb_lines` replaces the rgb.txt body when given.
@@ -119,6 +124,11 @@ Outcome run_source(io::FrameSource& source, const std::string& name, const std::
   const fs::path traj = options.out_dir / "trajectory.txt";
   EXPECT_TRUE(fs::exists(traj));
   for (const auto& p : io::read_tum_trajectory(traj)) o.stamps.push_back(p.stamp);
+  const auto& st = o.result.stats;
+  std::printf("[ stats    ] %s: frames %d tracked %zu lost %d relocalisations %d skipped %d ate %.4f m\n",
+              name.c_str(), st["frames"].get<int>(), o.stamps.size(), st["lost_frames"].get<int>(),
+              st["relocalizations"].get<int>(), st["skipped_frames"].get<int>(),
+              o.result.ate_rmse.value_or(-1.0));
   return o;
 }
 
@@ -204,6 +214,20 @@ TEST_F(Faults, AllZeroDepthDoesNotStopTracking) {
   EXPECT_GE(o.stamps.size(), 56u);
 }
 
+TEST_F(Faults, NoiseDepthFrameIsSurvived) {
+  const Sequence seq("noise_depth", first(60));
+  cv::Mat noise(480, 640, CV_16UC1);
+  cv::RNG rng(11);
+  rng.fill(noise, cv::RNG::UNIFORM, cv::Scalar::all(0), cv::Scalar::all(65536));
+  cv::imwrite(seq.depth(30).string(), noise);  // readings from 0 to 13 m, uncorrelated with the image
+  const Outcome o = run(seq);
+  EXPECT_TRUE(o.result.completed);
+  EXPECT_EQ(o.frames(), 60);
+  EXPECT_GE(o.tracked_in(seq, 31, 60), 27u);
+  ASSERT_TRUE(o.result.ate_rmse.has_value());
+  EXPECT_LT(*o.result.ate_rmse, 0.02);
+}
+
 TEST_F(Faults, BlackFramesAreSurvived) {
   const Sequence seq("black", first(60));
   for (std::size_t i : {30u, 31u, 32u})
@@ -215,7 +239,7 @@ TEST_F(Faults, BlackFramesAreSurvived) {
   EXPECT_GE(o.tracked_in(seq, 33, 60), 25u);  // relocalised or kept tracking after the black frames
   EXPECT_TRUE(o.tracked(seq.frames().back().rgb_stamp));
   ASSERT_TRUE(o.result.ate_rmse.has_value());
-  EXPECT_LT(*o.result.ate_rmse, 0.05);
+  EXPECT_LT(*o.result.ate_rmse, 0.02);
 }
 
 TEST_F(Faults, NoiseFrameIsSurvived) {
@@ -230,7 +254,7 @@ TEST_F(Faults, NoiseFrameIsSurvived) {
   EXPECT_GE(o.tracked_in(seq, 31, 60), 27u);
   EXPECT_TRUE(o.tracked(seq.frames().back().rgb_stamp));
   ASSERT_TRUE(o.result.ate_rmse.has_value());
-  EXPECT_LT(*o.result.ate_rmse, 0.05);
+  EXPECT_LT(*o.result.ate_rmse, 0.02);
 }
 
 TEST_F(Faults, TwoSecondGapIsBridged) {
@@ -244,7 +268,7 @@ TEST_F(Faults, TwoSecondGapIsBridged) {
   EXPECT_GE(o.tracked_in(seq, 30, 90), 50u);  // relocalised (or re-tracked) after the gap
   EXPECT_TRUE(o.tracked(seq.frames().back().rgb_stamp));
   ASSERT_TRUE(o.result.ate_rmse.has_value());
-  EXPECT_LT(*o.result.ate_rmse, 0.05);
+  EXPECT_LT(*o.result.ate_rmse, 0.02);
 }
 
 // Timestamps that do not increase cannot be associated: the sequence is refused before the run, with
@@ -296,6 +320,24 @@ TEST_F(Faults, EveryImageUnreadableEndsCleanlyWithAnEmptyTrajectory) {
   EXPECT_EQ(o.skipped(), 10);
   EXPECT_EQ(o.frames(), 0);
   EXPECT_TRUE(o.stamps.empty());
+}
+
+// A camera.yaml whose values are NaN must be refused like any out-of-range value. DISABLED: today
+// ConfigReader's range check (`field < lo || field > hi`, common/config_reader.hpp) lets NaN through
+// (found by fuzz/fuzz_config); enable once it reads `!(field >= lo && field <= hi)`.
+TEST_F(Faults, DISABLED_NanInCameraYamlIsAConfigErrorNamingFileAndLine) {
+  const Sequence seq("nan_camera", first(5));
+  {
+    std::ofstream out(seq.dir() / "camera.yaml", std::ios::app);
+    out << "depth_max: .nan\n";
+  }
+  try {
+    io::TumSequence source(seq.dir());
+    FAIL() << "a NaN depth_max was accepted";
+  } catch (const ConfigError& e) {
+    EXPECT_EQ(e.key(), "depth_max");
+    EXPECT_EQ(e.line(), 14);
+  }
 }
 
 // The live-camera path without a camera: the sequence's images turned into what OpenNI2 delivers
