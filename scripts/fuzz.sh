@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Builds the libFuzzer targets in fuzz/ with clang (ASan + UBSan) and runs each for SECONDS (default 10).
 #   scripts/fuzz.sh [seconds] [target ...]
-# Environment: BUILD_DIR (default build-fuzz), JOBS (default 1), NICE (default 19).
+# Environment: BUILD_DIR (default build-fuzz), JOBS (default 1), NICE (default 19), FUZZ_ARGS (extra
+# libFuzzer flags, e.g. "-fork=1 -ignore_crashes=1" to go on after a known crash).
 # Seeds come from fuzz/corpus/<target>/ (committed, small); what the fuzzer finds goes to
 # $BUILD_DIR/corpus/<target>/ and crashes to $BUILD_DIR/crashes/<target>/ (reproduce with
 # `$BUILD_DIR/<target> <crash-file>`). Exit status 1 when any target crashed.
@@ -34,11 +35,14 @@ for t in "${TARGETS[@]}"; do
   # -rss_limit_mb / -malloc_limit_mb: a parser that allocates what a header claims is a finding.
   nice -n "$NICE" "$BUILD_DIR/$t" "$work" "$ROOT/fuzz/corpus/$t" -max_total_time="$SECONDS_EACH" \
     -print_final_stats=1 -rss_limit_mb=2048 -malloc_limit_mb=1024 -timeout=10 \
-    -artifact_prefix="$crashes/" >"$log" 2>&1
+    -artifact_prefix="$crashes/" ${FUZZ_ARGS:-} >"$log" 2>&1
   rc=$?
   set -e
-  execs=$(grep -o 'stat::number_of_executed_units: *[0-9]*' "$log" | grep -o '[0-9]*$' || echo "?")
-  speed=$(grep -o 'stat::average_exec_per_sec: *[0-9]*' "$log" | grep -o '[0-9]*$' || echo "?")
+  execs=$(grep -o 'stat::number_of_executed_units: *[0-9]*' "$log" | grep -o '[0-9]*$' || true)
+  # Fork mode prints "#N ... exec/s" progress lines instead of final stats: take the last count.
+  [ -n "$execs" ] || execs=$(grep -o '^#[0-9]*' "$log" | tail -1 | tr -d '#' || true)
+  speed=$(grep -o 'stat::average_exec_per_sec: *[0-9]*' "$log" | grep -o '[0-9]*$' || true)
+  [ -n "$speed" ] || speed=$(grep -o 'exec/s: [0-9]*' "$log" | tail -1 | grep -o '[0-9]*$' || true)
   found=$(find "$crashes" -type f | wc -l)
   if [ "$rc" -ne 0 ] || [ "$found" -ne 0 ]; then
     result="FAILED (rc $rc, see $log)"
