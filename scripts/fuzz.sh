@@ -31,6 +31,8 @@ for t in "${TARGETS[@]}"; do
   crashes="$BUILD_DIR/crashes/$t"
   mkdir -p "$work" "$crashes"
   log="$BUILD_DIR/$t.log"
+  stamp="$BUILD_DIR/$t.start"
+  touch "$stamp"
   set +e
   # -rss_limit_mb / -malloc_limit_mb: a parser that allocates what a header claims is a finding.
   nice -n "$NICE" "$BUILD_DIR/$t" "$work" "$ROOT/fuzz/corpus/$t" -max_total_time="$SECONDS_EACH" \
@@ -43,7 +45,7 @@ for t in "${TARGETS[@]}"; do
   [ -n "$execs" ] || execs=$(grep -o '^#[0-9]*' "$log" | tail -1 | tr -d '#' || true)
   speed=$(grep -o 'stat::average_exec_per_sec: *[0-9]*' "$log" | grep -o '[0-9]*$' || true)
   [ -n "$speed" ] || speed=$(grep -o 'exec/s: [0-9]*' "$log" | tail -1 | grep -o '[0-9]*$' || true)
-  found=$(find "$crashes" -type f | wc -l)
+  found=$(find "$crashes" -type f -newer "$stamp" | wc -l)  # findings of this run only
   if [ "$rc" -ne 0 ] || [ "$found" -ne 0 ]; then
     result="FAILED (rc $rc, see $log)"
     status=1
