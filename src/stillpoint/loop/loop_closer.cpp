@@ -141,6 +141,7 @@ void LoopCloser::process(map::KeyframeId kid) {
 
 void LoopCloser::handle_candidates(const std::vector<LoopCandidate>& candidates, map::KeyframeId kid) {
   for (const LoopCandidate& c : candidates) {
+    spdlog::debug("loop candidate: keyframe {} -> {} (score {:.3f})", c.query, c.match, c.score);
     const auto verified = verify(c.query, c.match);
     if (!verified) continue;
     {
@@ -187,7 +188,10 @@ std::optional<LoopCloser::Verified> LoopCloser::verify(map::KeyframeId query, ma
   for (std::size_t r = 0; r < m_rows.size(); ++r)
     m->features.descriptors.row(m_rows[r]).copyTo(m_desc.row(static_cast<int>(r)));
   const auto matches = feat::match_ratio(q_desc, m_desc, 0.75f, track::kDescriptorThLow, true);
-  if (static_cast<int>(matches.size()) < config_.min_descriptor_matches) return std::nullopt;
+  if (static_cast<int>(matches.size()) < config_.min_descriptor_matches) {
+    spdlog::debug("loop candidate {}->{}: {} descriptor matches, rejected", query, match, matches.size());
+    return std::nullopt;
+  }
 
   // 2. 3-D/3-D RANSAC: the match side's map points (world) against the query's depth points (camera).
   std::vector<Eigen::Vector3d> src, dst;
@@ -202,7 +206,10 @@ std::optional<LoopCloser::Verified> LoopCloser::verify(map::KeyframeId query, ma
   rc.min_inliers = config_.min_ransac_inliers;
   rc.seed = static_cast<std::uint32_t>(query);
   const auto ransac = geo::estimate_se3_ransac(src, dst, rc);
-  if (!ransac) return std::nullopt;
+  if (!ransac) {
+    spdlog::debug("loop candidate {}->{}: RANSAC failed on {} matches", query, match, matches.size());
+    return std::nullopt;
+  }
 
   // 3. Refine: project the loop side's local map into the query with the RANSAC pose, then optimise.
   track::Frame frame;
@@ -237,7 +244,11 @@ std::optional<LoopCloser::Verified> LoopCloser::verify(map::KeyframeId query, ma
   const auto result =
       opt::optimize_pose(T, obs, opt::CameraModel{camera_.fx, camera_.fy, camera_.cx, camera_.cy, depth_.bf},
                          opt::PoseOptimizerConfig{});
-  if (result.inliers < config_.min_projection_inliers) return std::nullopt;
+  if (result.inliers < config_.min_projection_inliers) {
+    spdlog::debug("loop candidate {}->{}: {} inliers after refinement, rejected", query, match,
+                  result.inliers);
+    return std::nullopt;
+  }
   return Verified{T, result.inliers};
 }
 

@@ -18,7 +18,7 @@
 namespace sp::loop {
 
 struct LoopClosingConfig {
-  std::string detector = "bow-sequence";                     // off | bow-keyframe | bow-sequence
+  std::string detector = "bow-keyframe";                     // off | bow-keyframe | bow-sequence
   std::string vocabulary = "data/vocab/stillpoint_orb.spv";  // relative paths: from the project root
   LoopDetectorParams detection;
   std::size_t min_keyframes = 10;    // no detection before the map has this many keyframes
