@@ -74,3 +74,21 @@ TEST(ConfigReader, MissingFileAndSyntaxErrorNameTheFile) {
 
 }  // namespace
 }  // namespace sp
+
+namespace sp {
+namespace {
+
+TEST(ConfigReader, NanFailsTheRangeCheck) {
+  auto cfg = ConfigReader::from_string("fx: .nan\n", "cam.yaml");
+  double fx = 500;
+  EXPECT_THROW(cfg.read("fx", fx, 1.0, 10000.0), ConfigError);
+  EXPECT_THROW((void)cfg.require("fx", 1.0, 10000.0), ConfigError);
+}
+
+TEST(ConfigReader, NonScalarKeyIsAConfigError) {
+  auto cfg = ConfigReader::from_string("[a, b]: 1\n", "bad.yaml");
+  EXPECT_THROW(cfg.finish(), ConfigError);
+}
+
+}  // namespace
+}  // namespace sp

@@ -86,12 +86,16 @@ ConfigReader ConfigReader::section(const std::string& key) const {
 void ConfigReader::finish() const {
   // Walk every key below this reader's node; the first one never read is an error.
   std::function<void(const YAML::Node&, const std::string&)> walk = [&](const YAML::Node& node,
-                                                                         const std::string& prefix) {
+                                                                        const std::string& prefix) {
     for (const auto& kv : node) {
-      const std::string key = kv.first.as<std::string>();
+      const int line = kv.first.Mark().line >= 0 ? kv.first.Mark().line + 1 : 0;
+      if (!kv.first.IsScalar()) {
+        throw ConfigError(state_->file, line, prefix.empty() ? "(top level)" : prefix,
+                          "keys must be plain names");
+      }
+      const std::string key = kv.first.Scalar();
       const std::string full = prefix.empty() ? key : prefix + "." + key;
       if (!state_->used.contains(full)) {
-        const int line = kv.first.Mark().line >= 0 ? kv.first.Mark().line + 1 : 0;
         throw ConfigError(state_->file, line, full, "unknown key");
       }
       if (kv.second.IsMap()) walk(kv.second, full);

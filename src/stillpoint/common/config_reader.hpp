@@ -41,7 +41,7 @@ class ConfigReader {
   template <typename T>
   void read(const std::string& key, T& field, T lo, T hi) const {
     read(key, field);
-    if (field < lo || field > hi) {
+    if (!(field >= lo && field <= hi)) {  // also rejects NaN
       fail(key, "value " + std::to_string(field) + " is out of range [" + std::to_string(lo) + ", " +
                     std::to_string(hi) + "]");
     }
@@ -51,7 +51,7 @@ class ConfigReader {
   template <typename T>
   T require(const std::string& key, T lo, T hi) const {
     T value = require<T>(key);
-    if (value < lo || value > hi) {
+    if (!(value >= lo && value <= hi)) {  // also rejects NaN
       fail(key, "value " + std::to_string(value) + " is out of range [" + std::to_string(lo) + ", " +
                     std::to_string(hi) + "]");
     }
