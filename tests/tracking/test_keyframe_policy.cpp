@@ -67,10 +67,12 @@ TEST(ViewingAngle, MatchesKnownRotationAboutThePoint) {
   const Eigen::Vector3d p(0.3, -0.2, 2.0);
   const Eigen::Vector3d c_ref(0.0, 0.0, 0.0);
   for (double deg : {0.5, 25.0, 30.0, 35.0, 120.0}) {
-    const Eigen::AngleAxisd rot(deg * M_PI / 180.0, Eigen::Vector3d(0.2, 1.0, 0.1).normalized());
-    // Rotating the camera centre about the point changes the ray's direction by exactly `deg`.
-    const Eigen::Vector3d c_now =
-        p + rot * (c_ref - p) * 1.7;  // and the distance changes, which must not matter
+    // Rotating the camera centre about an axis through the point, perpendicular to the ray, turns
+    // the ray by exactly `deg`; moving the camera along the new ray must not change the angle.
+    const Eigen::Vector3d ray = c_ref - p;
+    const Eigen::Vector3d axis = ray.cross(Eigen::Vector3d(0.2, 1.0, 0.1)).normalized();
+    const Eigen::AngleAxisd rot(deg * M_PI / 180.0, axis);
+    const Eigen::Vector3d c_now = p + rot * ray * 1.7;
     EXPECT_NEAR(viewing_angle_change_deg(p, c_ref, c_now), deg, 1e-9);
   }
 }
