@@ -8,6 +8,8 @@
 
 #include "commands.hpp"
 #include "stillpoint/common/error.hpp"
+#include "stillpoint/io/camera_config.hpp"
+#include "stillpoint/io/openni2_source.hpp"
 #include "stillpoint/io/tum_sequence.hpp"
 #include "stillpoint/pipeline/runner.hpp"
 
@@ -51,6 +53,7 @@ struct RunArgs {
   std::string dataset;
   std::string config;
   std::string camera;
+  std::string camera_config;
   std::string out = "stillpoint_out";
   bool deterministic = false;
   bool no_progress = false;
@@ -81,16 +84,27 @@ int run(const RunArgs& args) {
   if (!args.keyframe_policy.empty()) config.tracker.keyframes.policy = args.keyframe_policy;
   if (!args.loop_detector.empty()) config.loop.detector = args.loop_detector;
   InterruptWatcher interrupt;  // before any thread starts, so all threads inherit the blocked mask
-  io::TumSequenceOptions seq_options;
-  if (!args.camera.empty()) seq_options.camera_file = args.camera;
-  seq_options.max_frames = args.max_frames;
-  io::TumSequence sequence(dataset, seq_options);
+  std::unique_ptr<io::FrameSource> source;
+  std::optional<std::filesystem::path> groundtruth;
+  if (args.camera == "openni2") {
+    // Live camera: intrinsics from --camera-config, else from the device's field of view.
+    io::OpenNI2Options live;
+    if (!args.camera_config.empty()) live.camera = io::load_camera_config(args.camera_config);
+    source = io::open_openni2_camera(live);
+  } else {
+    io::TumSequenceOptions seq_options;
+    if (!args.camera.empty()) seq_options.camera_file = args.camera;
+    seq_options.max_frames = args.max_frames;
+    auto sequence = std::make_unique<io::TumSequence>(dataset, seq_options);
+    groundtruth = sequence->groundtruth_path();
+    source = std::move(sequence);
+  }
 
   pipeline::RunOptions options;
   options.out_dir = args.out;
   options.deterministic = args.deterministic;
   options.progress = !args.no_progress;
-  options.groundtruth = sequence.groundtruth_path();
+  options.groundtruth = groundtruth;
   options.boxes_file = dataset / "boxes.txt";
   options.masks_dir = dataset / "masks";
   options.project_root = SP_SOURCE_DIR;
@@ -98,7 +112,7 @@ int run(const RunArgs& args) {
   options.label = dataset.filename().string();
   options.extra_stats["dataset"] = dataset.string();
   options.extra_stats["config"] = config_file.string();
-  const auto result = pipeline::run_slam(sequence, config, options);
+  const auto result = pipeline::run_slam(*source, config, options);
 
   const auto& s = result.stats;
   fmt::print("\n== StillPoint run: {} ==\n", dataset.filename().string());
@@ -127,7 +141,10 @@ void add_run_command(CLI::App& app) {
       app.add_subcommand("run", "Run SLAM on a TUM-format RGB-D sequence (default: the bundled demo)");
   cmd->add_option("--dataset", args->dataset, "Sequence folder in TUM RGB-D layout (default: bundled demo)");
   cmd->add_option("--config", args->config, "System configuration YAML (default: config/stillpoint.yaml)");
-  cmd->add_option("--camera", args->camera, "Camera YAML (default: DATASET/camera.yaml)");
+  cmd->add_option("--camera", args->camera,
+                  "Camera YAML (default: DATASET/camera.yaml), or 'openni2' for a live RGB-D camera");
+  cmd->add_option("--camera-config", args->camera_config,
+                  "Intrinsics YAML for a live camera (default: from its FOV)");
   cmd->add_option("--out", args->out, "Output folder")->capture_default_str();
   cmd->add_flag("--deterministic", args->deterministic,
                 "Fixed seeds, stages in lock-step: identical output twice");
