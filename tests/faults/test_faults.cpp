@@ -322,10 +322,9 @@ TEST_F(Faults, EveryImageUnreadableEndsCleanlyWithAnEmptyTrajectory) {
   EXPECT_TRUE(o.stamps.empty());
 }
 
-// A camera.yaml whose values are NaN must be refused like any out-of-range value. DISABLED: today
-// ConfigReader's range check (`field < lo || field > hi`, common/config_reader.hpp) lets NaN through
-// (found by fuzz/fuzz_config); enable once it reads `!(field >= lo && field <= hi)`.
-TEST_F(Faults, DISABLED_NanInCameraYamlIsAConfigErrorNamingFileAndLine) {
+// A camera.yaml whose values are NaN must be refused like any out-of-range value (NaN used to pass
+// ConfigReader's range checks; found by fuzz/fuzz_config, fixed in 8e49e49).
+TEST_F(Faults, NanInCameraYamlIsAConfigErrorNamingFileAndLine) {
   const Sequence seq("nan_camera", first(5));
   {
     std::ofstream out(seq.dir() / "camera.yaml", std::ios::app);
