@@ -11,6 +11,8 @@ DynamicConfig DynamicConfig::from_yaml(const ConfigReader& r) {
   r.read_choice("mode", c.mode, {"auto", "off", "flow", "detector", "detector+flow", "oracle"});
   r.read("model", c.model);
   r.read("detector_budget_ms", c.detector_budget_ms, 0.0, 1000.0);
+  r.read("detector_threads", c.detector_threads, 0, 64);
+  r.read("detector_interval", c.detector_interval, 1, 100);
   if (r.has("detector")) {
     c.detector = dyn::DetectorConfig::from_yaml(r.section("detector"));
     c.detector_configured = true;
@@ -35,7 +37,9 @@ dyn::CullMode cull_mode_for(const std::string& mode) {
 
 DynamicCulling::DynamicCulling(const DynamicConfig& config, const geo::CameraIntrinsics& camera,
                                bool deterministic, const std::optional<std::filesystem::path>& boxes_file)
-    : mode_(config.resolved_mode()), budget_ms_(config.detector_budget_ms) {
+    : mode_(config.resolved_mode()),
+      budget_ms_(config.detector_budget_ms),
+      interval_(config.detector_interval) {
   K_ << camera.fx, 0, camera.cx, 0, camera.fy, camera.cy, 0, 0, 1;
   if (mode_ == "off") return;
   if (mode_ == "detector" || mode_ == "detector+flow") {
@@ -44,6 +48,7 @@ DynamicCulling::DynamicCulling(const DynamicConfig& config, const geo::CameraInt
     dyn::DetectorConfig dc =
         config.detector_configured ? config.detector : dyn::DetectorConfig::for_model(config.model);
     dc.model = config.model;
+    if (!config.detector_configured) dc.threads = config.detector_threads;
     detector_ = std::make_unique<dyn::AsyncDetector>(
         dc, deterministic ? dyn::AsyncDetector::Mode::kSync : dyn::AsyncDetector::Mode::kAsync);
   }
@@ -63,7 +68,9 @@ DynamicCulling::~DynamicCulling() {
 }
 
 void DynamicCulling::submit(const io::FrameData& data) {
-  if (detector_) detector_->submit(data.index, data.stamp, data.bgr);
+  if (detector_ && data.index % static_cast<std::size_t>(interval_) == 0) {
+    detector_->submit(data.index, data.stamp, data.bgr);
+  }
 }
 
 CullingOutput DynamicCulling::process(const io::FrameData& data, const cv::Mat& gray,

@@ -19,9 +19,11 @@ namespace sp::pipeline {
 struct DynamicConfig {
   // off | flow | detector | detector+flow | oracle | auto (= detector+flow with a model, else flow)
   std::string mode = "auto";
-  std::string model;                 // detector model (.onnx or Darknet .cfg); empty = none
-  double detector_budget_ms = 15.0;  // ms tracking may wait for the current frame's detection
-  dyn::DetectorConfig detector;      // used as given when the file sets `detector`, else from the model
+  std::string model;                // detector model (.onnx or Darknet .cfg); empty = none
+  double detector_budget_ms = 0.0;  // ms tracking may wait for the current frame's detection
+  int detector_threads = 1;         // OpenCV threads for inference (the other core tracks and maps)
+  int detector_interval = 3;        // detect every N-th frame; boxes are carried by flow in between
+  dyn::DetectorConfig detector;     // used as given when the file sets `detector`, else from the model
   bool detector_configured = false;
   dyn::MotionCheckConfig motion;
   static DynamicConfig from_yaml(const ConfigReader& r);
@@ -56,6 +58,7 @@ class DynamicCulling {
  private:
   std::string mode_;
   double budget_ms_;
+  int interval_;
   Eigen::Matrix3d K_;
   std::unique_ptr<dyn::AsyncDetector> detector_;
   std::optional<dyn::OracleDetections> oracle_;
