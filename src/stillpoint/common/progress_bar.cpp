@@ -7,7 +7,9 @@
 namespace sp {
 
 ProgressBar::ProgressBar(std::string label, std::size_t total, bool enabled)
-    : label_(std::move(label)), total_(std::max<std::size_t>(total, 1)), enabled_(enabled),
+    : label_(std::move(label)),
+      total_(std::max<std::size_t>(total, 1)),
+      enabled_(enabled),
       tty_(isatty(fileno(stderr)) != 0) {}
 
 ProgressBar::~ProgressBar() { finish(); }
@@ -20,8 +22,8 @@ void ProgressBar::update(std::size_t done, const std::string& note) {
     const int filled = static_cast<int>(frac * kWidth);
     std::string bar(static_cast<std::size_t>(filled), '#');
     bar.resize(kWidth, '.');
-    std::fprintf(stderr, "\r%s [%s] %5.1f%% %zu/%zu %s\x1b[K", label_.c_str(), bar.c_str(), frac * 100.0, done,
-                 total_, note.c_str());
+    std::fprintf(stderr, "\r%s [%s] %5.1f%% %zu/%zu %s\x1b[K", label_.c_str(), bar.c_str(), frac * 100.0,
+                 done, total_, note.c_str());
     std::fflush(stderr);
   } else {
     const int decile = static_cast<int>(frac * 10.0);

@@ -14,7 +14,7 @@ struct CameraIntrinsics {
   double k1 = 0, k2 = 0, p1 = 0, p2 = 0, k3 = 0;
 
   [[nodiscard]] bool has_distortion() const { return k1 != 0 || k2 != 0 || p1 != 0 || p2 != 0 || k3 != 0; }
-  [[nodiscard]] cv::Mat K() const;           // 3x3 CV_64F
+  [[nodiscard]] cv::Mat K() const;            // 3x3 CV_64F
   [[nodiscard]] cv::Mat dist_coeffs() const;  // 1x5 CV_64F (k1 k2 p1 p2 k3)
 
   // Ideal pinhole projection of a point in the camera frame (z > 0 is the caller's check).
