@@ -23,6 +23,11 @@ void apply_rotation_check(Frame& cur, feat::RotationHistogram& hist, int& matche
   }
 }
 
+// The virtual right coordinate must agree too: it checks the depth (RGB-D).
+bool right_coordinate_agrees(const Frame& cur, std::size_t ci, double u, double z, double bf, double radius) {
+  return cur.features.u_right[ci] <= 0 || std::abs(u - bf / z - cur.features.u_right[ci]) <= radius;
+}
+
 float angle_diff(float a, float b) {
   float d = a - b;
   if (d < 0) d += 360.0f;
@@ -69,9 +74,7 @@ int match_last_frame(map::MapView& view, Frame& cur, const Frame& last, double r
     int best_idx = -1;
     for (int c : candidates) {
       const auto ci = static_cast<std::size_t>(c);
-      if (cur.points[ci] != map::kNoPoint) continue;
-      // The virtual right coordinate must agree too: it checks the depth (RGB-D).
-      if (cur.features.u_right[ci] > 0 && std::abs(uv.x() - ctx.bf / z - cur.features.u_right[ci]) > r)
+      if (cur.points[ci] != map::kNoPoint || !right_coordinate_agrees(cur, ci, uv.x(), z, ctx.bf, r))
         continue;
       const int d = distance(p->descriptor, 0, cur.features.descriptors, c);
       if (d < best) {
@@ -115,9 +118,7 @@ int match_local_points(map::MapView& view, Frame& cur, const std::vector<map::Po
     int best = 256, second = 256, best_level = -1, second_level = -1, best_idx = -1;
     for (int c : candidates) {
       const auto ci = static_cast<std::size_t>(c);
-      if (cur.points[ci] != map::kNoPoint) continue;
-      // The virtual right coordinate must agree too: it checks the depth (RGB-D).
-      if (cur.features.u_right[ci] > 0 && std::abs(uv.x() - ctx.bf / z - cur.features.u_right[ci]) > r)
+      if (cur.points[ci] != map::kNoPoint || !right_coordinate_agrees(cur, ci, uv.x(), z, ctx.bf, r))
         continue;
       const int d = distance(p->descriptor, 0, cur.features.descriptors, c);
       if (d < best) {
