@@ -12,6 +12,7 @@ KeyframePolicyConfig KeyframePolicyConfig::from_yaml(const ConfigReader& r) {
   KeyframePolicyConfig c;
   r.read_choice("policy", c.policy, {"heuristic", "adaptive"});
   r.read("max_interval_s", c.max_interval_s, 0.05, 60.0);
+  r.read("min_interval_s", c.min_interval_s, 0.0, 60.0);
   r.read("reference_ratio", c.reference_ratio, 0.05, 1.0);
   r.read("min_inliers", c.min_inliers, 0, 1000);
   r.read("close_tracked_min", c.close_tracked_min, 0, 10000);
@@ -55,7 +56,8 @@ class HeuristicPolicy final : public KeyframePolicy {
     if (s.weak || s.swamped) return false;
     // ORB-SLAM3 RGB-D: (c1a || c1b || c1c) && c2.
     const bool c1a = s.timed_out;
-    const bool c1b = c.mapping_idle;
+    const bool c1b =
+        c.mapping_idle && static_cast<double>(c.frames_since_keyframe) >= cfg_.min_interval_s * c.fps;
     const bool c1c = c.tracked_inliers < 0.25 * c.reference_tracked || s.need_close;
     const bool c2 = s.losing_reference || s.need_close;
     return (c1a || c1b || c1c) && c2;

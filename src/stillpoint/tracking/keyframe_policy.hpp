@@ -33,6 +33,7 @@ struct KeyframeCandidate {
 struct KeyframePolicyConfig {
   std::string policy = "heuristic";   // heuristic | adaptive
   double max_interval_s = 1.0;        // s, a keyframe at least this often when mapping is idle
+  double min_interval_s = 0.0;        // s, "mapping idle" alone never inserts sooner than this
   double reference_ratio = 0.75;      // inliers below this share of the reference's points -> new keyframe
   int min_inliers = 15;               // never insert from a frame tracked this weakly
   int close_tracked_min = 100;        // fewer tracked close points than this ...
