@@ -303,7 +303,6 @@ void LoopCloser::correct(map::KeyframeId query, map::KeyframeId match, const geo
     std::vector<opt::PoseGraphVertex> vertices;
     std::vector<opt::PoseGraphEdge> edges;
     const std::vector<map::KeyframeId> ids = view.keyframe_ids_sorted();
-    const std::unordered_set<map::KeyframeId> in_group(group.begin(), group.end());
     auto relative_old = [&](map::KeyframeId i, map::KeyframeId j) {
       return old_pose[i] * old_pose[j].inverse();
     };
@@ -348,7 +347,6 @@ void LoopCloser::correct(map::KeyframeId query, map::KeyframeId match, const geo
     for (const auto& [pid, p] : view.points()) {
       if (!p.bad) view.update_point_normal_and_depth(pid, pyramid_);
     }
-    (void)in_group;
     map_.notify_big_change();
     changes = map_.big_change_count();
   }

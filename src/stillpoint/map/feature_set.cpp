@@ -18,27 +18,6 @@ ScalePyramid ScalePyramid::make(int levels, double scale_factor) {
   return p;
 }
 
-void FeatureSet::remove_if(const std::vector<bool>& drop) {
-  std::size_t out = 0;
-  cv::Mat kept(0, descriptors.cols, descriptors.type());
-  std::vector<int> keep_rows;
-  for (std::size_t i = 0; i < keypoints.size(); ++i) {
-    if (i < drop.size() && drop[i]) continue;
-    keypoints[out] = keypoints[i];
-    depth[out] = depth[i];
-    u_right[out] = u_right[i];
-    keep_rows.push_back(static_cast<int>(i));
-    ++out;
-  }
-  keypoints.resize(out);
-  depth.resize(out);
-  u_right.resize(out);
-  cv::Mat d(static_cast<int>(out), descriptors.cols, descriptors.type());
-  for (std::size_t r = 0; r < keep_rows.size(); ++r)
-    descriptors.row(keep_rows[r]).copyTo(d.row(static_cast<int>(r)));
-  descriptors = d;
-}
-
 FeatureIndex::FeatureIndex(const std::vector<cv::KeyPoint>& keypoints, int width, int height)
     : cols_(std::max(1, (width + kCell - 1) / kCell)),
       rows_(std::max(1, (height + kCell - 1) / kCell)),

@@ -23,8 +23,6 @@ struct FeatureSet {
   std::vector<float> u_right;           // virtual stereo coordinate u - bf/depth, < 0 when invalid
 
   [[nodiscard]] std::size_t size() const { return keypoints.size(); }
-  // Keeps only the features whose flag is false (used to drop dynamic features).
-  void remove_if(const std::vector<bool>& drop);
 };
 
 // Uniform grid over an image for "features near (u, v)" queries.

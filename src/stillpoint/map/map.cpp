@@ -4,14 +4,9 @@
 #include <cmath>
 
 #include "stillpoint/common/error.hpp"
+#include "stillpoint/features/descriptor.hpp"
 
 namespace sp::map {
-
-namespace {
-int descriptor_distance(const cv::Mat& a, const cv::Mat& b) {
-  return static_cast<int>(cv::norm(a, b, cv::NORM_HAMMING));
-}
-}  // namespace
 
 int MapPoint::predict_level(double distance, const ScalePyramid& pyramid) const {
   if (distance <= 0 || max_distance <= 0) return 0;
@@ -144,25 +139,16 @@ void MapView::update_point_descriptor(PointId pid) {
   MapPoint* p = point(pid);
   if (p == nullptr || p->bad || p->observations.empty()) return;
   std::vector<cv::Mat> descs;
+  std::vector<const std::uint8_t*> rows;
   for (const auto& [kid, feature] : p->observations) {
     const Keyframe* kf = keyframe(kid);
     if (kf == nullptr || kf->bad) continue;
     descs.push_back(kf->features.descriptors.row(feature));
+    rows.push_back(descs.back().ptr<std::uint8_t>());
   }
   if (descs.empty()) return;
   // The representative descriptor has the least median distance to the others.
-  std::size_t best = 0;
-  int best_median = std::numeric_limits<int>::max();
-  for (std::size_t i = 0; i < descs.size(); ++i) {
-    std::vector<int> d;
-    for (std::size_t j = 0; j < descs.size(); ++j) d.push_back(descriptor_distance(descs[i], descs[j]));
-    std::nth_element(d.begin(), d.begin() + static_cast<long>((d.size() - 1) / 2), d.end());
-    const int median = d[(d.size() - 1) / 2];
-    if (median < best_median) {
-      best_median = median;
-      best = i;
-    }
-  }
+  const auto best = static_cast<std::size_t>(feat::distinctive_descriptor_index(rows));
   p->descriptor = descs[best].clone();
 }
 

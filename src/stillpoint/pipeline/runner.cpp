@@ -25,7 +25,8 @@ void write_json(const std::filesystem::path& file, const nlohmann::json& j) {
   std::filesystem::rename(tmp, file);
 }
 
-void write_outputs(SlamSystem& system, const RunOptions& options, RunResult& result) {
+void write_outputs(SlamSystem& system, const RunOptions& options, const nlohmann::json& run_stats,
+                   RunResult& result) {
   std::filesystem::create_directories(options.out_dir);
   const auto trajectory = system.trajectory();
   io::write_tum_trajectory(options.out_dir / "trajectory.txt", trajectory);
@@ -33,6 +34,7 @@ void write_outputs(SlamSystem& system, const RunOptions& options, RunResult& res
   result.stats = system.statistics();
   result.stats["completed"] = result.completed;
   for (const auto& [k, v] : options.extra_stats.items()) result.stats[k] = v;
+  for (const auto& [k, v] : run_stats.items()) result.stats[k] = v;
   if (options.groundtruth && trajectory.size() >= 3) {
     try {
       const auto gt = io::read_tum_trajectory(*options.groundtruth);
@@ -85,11 +87,10 @@ RunResult run_slam(io::FrameSource& source, const SystemConfig& config, const Ru
   bar.finish();
   system.finish();
   const double seconds = wall.elapsed_ms() / 1000.0;
-  write_outputs(system, options, result);
-  result.stats["wall_s"] = seconds;
-  result.stats["fps"] = static_cast<double>(done) / std::max(1e-9, seconds);
-  result.stats["skipped_frames"] = source.skipped_frames();
-  write_json(options.out_dir / "stats.json", result.stats);
+  const nlohmann::json run_stats = {{"wall_s", seconds},
+                                    {"fps", static_cast<double>(done) / std::max(1e-9, seconds)},
+                                    {"skipped_frames", source.skipped_frames()}};
+  write_outputs(system, options, run_stats, result);
   return result;
 }
 
