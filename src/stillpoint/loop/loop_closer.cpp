@@ -214,7 +214,7 @@ std::optional<LoopCloser::Verified> LoopCloser::verify(map::KeyframeId query, ma
   // 3. Refine: project the loop side's local map into the query with the RANSAC pose, then optimise.
   track::Frame frame;
   frame.features = q->features;
-  frame.grid = map::FeatureIndex(frame.features.keypoints, camera_.width, camera_.height);
+  frame.grid = map::make_feature_grid(frame.features.keypoints, camera_.width, camera_.height);
   frame.reset_matches();
   frame.T_cw = ransac->T_dst_src;
   frame.has_pose = true;

@@ -3,6 +3,7 @@
 #include <opencv2/core.hpp>
 #include <vector>
 
+#include "stillpoint/features/feature_grid.hpp"
 #include "stillpoint/geometry/camera.hpp"
 
 namespace sp::map {
@@ -25,20 +26,7 @@ struct FeatureSet {
   [[nodiscard]] std::size_t size() const { return keypoints.size(); }
 };
 
-// Uniform grid over an image for "features near (u, v)" queries.
-class FeatureIndex {
- public:
-  FeatureIndex() = default;
-  FeatureIndex(const std::vector<cv::KeyPoint>& keypoints, int width, int height);
-  [[nodiscard]] std::vector<int> in_area(double u, double v, double radius, int min_level = -1,
-                                         int max_level = -1) const;
-
- private:
-  static constexpr int kCell = 10;  // px
-  int cols_ = 0, rows_ = 0;
-  std::vector<cv::Point2f> points_;  // own copy: the index stays valid when its owner moves
-  std::vector<int> levels_;
-  std::vector<std::vector<int>> cells_;
-};
+// The features module's grid over a frame's keypoints, for "features near (u, v)" queries.
+feat::FeatureGrid make_feature_grid(const std::vector<cv::KeyPoint>& keypoints, int width, int height);
 
 }  // namespace sp::map

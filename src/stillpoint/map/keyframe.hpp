@@ -20,7 +20,7 @@ struct Keyframe {
   double stamp = 0;
   geo::SE3 T_cw;
   FeatureSet features;
-  FeatureIndex index;
+  feat::FeatureGrid index;
   std::vector<PointId> points;  // per feature, kNoPoint when unmatched
   cv::Mat thumbnail;            // small colour image for place recognition and reports
 

@@ -21,7 +21,7 @@ struct Frame {
   std::size_t index = 0;
   double stamp = 0;
   map::FeatureSet features;
-  map::FeatureIndex grid;
+  feat::FeatureGrid grid;
   std::vector<map::PointId> points;  // per feature
   std::vector<bool> outlier;         // per feature, set by pose optimisation
   geo::SE3 T_cw;

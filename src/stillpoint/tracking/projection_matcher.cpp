@@ -62,18 +62,18 @@ int match_last_frame(map::MapView& view, Frame& cur, const Frame& last, double r
     if (!project_point(cur.T_cw, p->position, ctx.camera, uv, z)) continue;
     const int last_level = last.features.keypoints[i].octave;
     const double r = radius * ctx.pyramid.scale[static_cast<std::size_t>(last_level)];
-    std::vector<int> candidates;
+    std::vector<std::size_t> candidates;
     if (forward) {
-      candidates = cur.grid.in_area(uv.x(), uv.y(), r, last_level);
+      candidates = cur.grid.in_area(uv.x(), uv.y(), static_cast<float>(r), last_level);
     } else if (backward) {
-      candidates = cur.grid.in_area(uv.x(), uv.y(), r, 0, last_level);
+      candidates = cur.grid.in_area(uv.x(), uv.y(), static_cast<float>(r), 0, last_level);
     } else {
-      candidates = cur.grid.in_area(uv.x(), uv.y(), r, last_level - 1, last_level + 1);
+      candidates = cur.grid.in_area(uv.x(), uv.y(), static_cast<float>(r), last_level - 1, last_level + 1);
     }
     int best = 256;
     int best_idx = -1;
-    for (int c : candidates) {
-      const auto ci = static_cast<std::size_t>(c);
+    for (const std::size_t ci : candidates) {
+      const int c = static_cast<int>(ci);
       if (cur.points[ci] != map::kNoPoint || !right_coordinate_agrees(cur, ci, uv.x(), z, ctx.bf, r))
         continue;
       const int d = distance(p->descriptor, 0, cur.features.descriptors, c);
@@ -114,10 +114,10 @@ int match_local_points(map::MapView& view, Frame& cur, const std::vector<map::Po
     const double cos_view = ray.dot(p->normal) / dist;
     const double r =
         radius_factor * (cos_view > 0.998 ? 2.5 : 4.0) * ctx.pyramid.scale[static_cast<std::size_t>(level)];
-    const auto candidates = cur.grid.in_area(uv.x(), uv.y(), r, level - 1, level);
+    const auto candidates = cur.grid.in_area(uv.x(), uv.y(), static_cast<float>(r), level - 1, level);
     int best = 256, second = 256, best_level = -1, second_level = -1, best_idx = -1;
-    for (int c : candidates) {
-      const auto ci = static_cast<std::size_t>(c);
+    for (const std::size_t ci : candidates) {
+      const int c = static_cast<int>(ci);
       if (cur.points[ci] != map::kNoPoint || !right_coordinate_agrees(cur, ci, uv.x(), z, ctx.bf, r))
         continue;
       const int d = distance(p->descriptor, 0, cur.features.descriptors, c);
@@ -192,8 +192,8 @@ int fuse_into_keyframe(map::MapView& view, map::KeyframeId target, const std::ve
     const int level = p->predict_level(dist, ctx.pyramid);
     const double r = radius * ctx.pyramid.scale[static_cast<std::size_t>(level)];
     int best = 256, best_idx = -1;
-    for (int c : kf->index.in_area(uv.x(), uv.y(), r)) {
-      const auto ci = static_cast<std::size_t>(c);
+    for (const std::size_t ci : kf->index.in_area(uv.x(), uv.y(), static_cast<float>(r))) {
+      const int c = static_cast<int>(ci);
       const auto& kp = kf->features.keypoints[ci];
       if (kp.octave < level - 1 || kp.octave > level) continue;
       // Reprojection error gate (chi-square 3 dof for RGB-D, 2 dof otherwise).

@@ -55,7 +55,7 @@ Tracker::Tracker(map::Map& map, TrackerConfig config, geo::CameraIntrinsics came
 TrackOutcome Tracker::track(Frame& frame, const MappingStatus& mapping) {
   TrackOutcome out;
   frame.reset_matches();
-  frame.grid = map::FeatureIndex(frame.features.keypoints, camera_.width, camera_.height);
+  frame.grid = map::make_feature_grid(frame.features.keypoints, camera_.width, camera_.height);
   map::MapView view = map_.view();
 
   if (state_ == TrackingState::NotInitialized) {
@@ -372,7 +372,7 @@ map::KeyframeId Tracker::create_keyframe(map::MapView& view, Frame& frame) {
   kf.stamp = frame.stamp;
   kf.T_cw = frame.T_cw;
   kf.features = frame.features;
-  kf.index = map::FeatureIndex(kf.features.keypoints, camera_.width, camera_.height);
+  kf.index = map::make_feature_grid(kf.features.keypoints, camera_.width, camera_.height);
   kf.thumbnail = frame.thumbnail;
   kf.points.assign(frame.features.size(), map::kNoPoint);
   for (std::size_t i = 0; i < frame.points.size(); ++i) {
