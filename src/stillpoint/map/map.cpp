@@ -306,6 +306,32 @@ std::size_t MapView::live_points() const {
       std::count_if(map_.points_.begin(), map_.points_.end(), [](const auto& kv) { return !kv.second.bad; }));
 }
 
+std::pair<KeyframeId, PointId> MapView::next_ids() const {
+  return {map_.next_keyframe_id_, map_.next_point_id_};
+}
+
+void MapView::restore(std::vector<Keyframe> keyframes, std::vector<MapPoint> points,
+                      KeyframeId next_keyframe_id, PointId next_point_id) {
+  if (!map_.keyframes_.empty() || !map_.points_.empty())
+    throw Error("map: restore into a map that is not empty");
+  std::unordered_map<KeyframeId, Keyframe> kfs;
+  std::unordered_map<PointId, MapPoint> pts;
+  for (Keyframe& kf : keyframes) {
+    const KeyframeId id = kf.id;
+    if (id == kNoKeyframe || id >= next_keyframe_id || !kfs.emplace(id, std::move(kf)).second)
+      throw Error("map: restore with a keyframe id that is 0, repeated or not below the id counter");
+  }
+  for (MapPoint& p : points) {
+    const PointId id = p.id;
+    if (id == kNoPoint || id >= next_point_id || !pts.emplace(id, std::move(p)).second)
+      throw Error("map: restore with a point id that is 0, repeated or not below the id counter");
+  }
+  map_.keyframes_ = std::move(kfs);
+  map_.points_ = std::move(pts);
+  map_.next_keyframe_id_ = next_keyframe_id;
+  map_.next_point_id_ = next_point_id;
+}
+
 void MapView::purge_bad() {
   std::erase_if(map_.points_,
                 [](const auto& kv) { return kv.second.bad && kv.second.replaced_by == kNoPoint; });

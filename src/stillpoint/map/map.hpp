@@ -49,8 +49,15 @@ class MapView {
   [[nodiscard]] std::vector<KeyframeId> keyframe_ids_sorted() const;
   [[nodiscard]] std::size_t live_keyframes() const;
   [[nodiscard]] std::size_t live_points() const;
+  // The ids the next add_keyframe / add_point will hand out (map files save them).
+  [[nodiscard]] std::pair<KeyframeId, PointId> next_ids() const;
   // Drops bad records for good (they are kept a while so ids held by other stages resolve).
   void purge_bad();
+  // Fills an EMPTY map with records that keep their ids (a loaded map file); new ids continue from
+  // the given counters. Records are stored as they are: the map-file loader has validated their
+  // cross-references. Throws sp::Error when the map is not empty or an id is 0, repeated or >= its counter.
+  void restore(std::vector<Keyframe> keyframes, std::vector<MapPoint> points, KeyframeId next_keyframe_id,
+               PointId next_point_id);
 
  private:
   Map& map_;
