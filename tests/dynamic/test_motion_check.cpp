@@ -282,7 +282,7 @@ TEST(MotionCheck, ConfigAndInputErrors) {
   r.finish();
   EXPECT_EQ(c.mode, CullMode::kFlowOnly);
   EXPECT_DOUBLE_EQ(c.epsilon_epipolar_px, 1.5);
-  EXPECT_EQ(c.lk_window, 15);
+  EXPECT_EQ(c.lk_window, 15);  // the file overrides the default
   EXPECT_THROW(MotionCheckConfig::from_yaml(ConfigReader::from_string("mode: magic\n", "m.yaml")),
                ConfigError);
   EXPECT_THROW(

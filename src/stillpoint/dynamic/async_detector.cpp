@@ -1,19 +1,29 @@
 #include "stillpoint/dynamic/async_detector.hpp"
 
 #include <spdlog/spdlog.h>
+#include <sys/resource.h>
+#include <unistd.h>
 
 #include "stillpoint/dynamic/yolo_detector.hpp"
 
 namespace sp::dyn {
 
-AsyncDetector::AsyncDetector(DetectFn detect, Mode mode) : detect_(std::move(detect)), mode_(mode) {
-  if (mode_ == Mode::kAsync) worker_ = std::thread([this] { run(); });
+AsyncDetector::AsyncDetector(DetectFn detect, Mode mode, int niceness)
+    : detect_(std::move(detect)), mode_(mode) {
+  if (mode_ == Mode::kAsync) {
+    worker_ = std::thread([this, niceness] {
+      // Linux applies a nice value to the calling thread only (tid), not to the whole process.
+      if (niceness > 0 && setpriority(PRIO_PROCESS, static_cast<id_t>(::gettid()), niceness) != 0)
+        spdlog::warn("detector thread: could not lower its priority");
+      run();
+    });
+  }
 }
 
-AsyncDetector::AsyncDetector(const DetectorConfig& cfg, Mode mode)
+AsyncDetector::AsyncDetector(const DetectorConfig& cfg, Mode mode, int niceness)
     : AsyncDetector(
-          [det = std::make_shared<YoloDetector>(cfg)](const cv::Mat& bgr) { return det->detect(bgr); },
-          mode) {}
+          [det = std::make_shared<YoloDetector>(cfg)](const cv::Mat& bgr) { return det->detect(bgr); }, mode,
+          niceness) {}
 
 AsyncDetector::~AsyncDetector() { stop(); }
 

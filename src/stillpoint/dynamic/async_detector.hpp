@@ -22,9 +22,11 @@ class AsyncDetector {
   enum class Mode { kAsync, kSync };  // kSync: submit() detects in the caller's thread (deterministic)
 
   // Wraps any detection function (tests, other detectors); frame_index/stamp are filled in here.
-  AsyncDetector(DetectFn detect, Mode mode);
+  // `niceness` (0-19) lowers the worker thread's scheduling priority: on a 2-core robot board the
+  // tracking thread should win the CPU, the detector's boxes are carried forward by flow anyway.
+  AsyncDetector(DetectFn detect, Mode mode, int niceness = 0);
   // Builds a YoloDetector in the caller's thread (load errors throw here, not in the worker).
-  AsyncDetector(const DetectorConfig& cfg, Mode mode);
+  AsyncDetector(const DetectorConfig& cfg, Mode mode, int niceness = 0);
   ~AsyncDetector();
   AsyncDetector(const AsyncDetector&) = delete;
   AsyncDetector& operator=(const AsyncDetector&) = delete;

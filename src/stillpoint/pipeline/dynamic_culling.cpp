@@ -13,6 +13,7 @@ DynamicConfig DynamicConfig::from_yaml(const ConfigReader& r) {
   r.read("detector_budget_ms", c.detector_budget_ms, 0.0, 1000.0);
   r.read("detector_threads", c.detector_threads, 0, 64);
   r.read("detector_interval", c.detector_interval, 1, 100);
+  r.read("detector_nice", c.detector_nice, 0, 19);
   if (r.has("detector")) {
     c.detector = dyn::DetectorConfig::from_yaml(r.section("detector"));
     c.detector_configured = true;
@@ -50,7 +51,8 @@ DynamicCulling::DynamicCulling(const DynamicConfig& config, const geo::CameraInt
     dc.model = config.model;
     if (!config.detector_configured) dc.threads = config.detector_threads;
     detector_ = std::make_unique<dyn::AsyncDetector>(
-        dc, deterministic ? dyn::AsyncDetector::Mode::kSync : dyn::AsyncDetector::Mode::kAsync);
+        dc, deterministic ? dyn::AsyncDetector::Mode::kSync : dyn::AsyncDetector::Mode::kAsync,
+        config.detector_nice);
   }
   if (mode_ == "oracle") {
     if (!boxes_file || !std::filesystem::exists(*boxes_file)) {

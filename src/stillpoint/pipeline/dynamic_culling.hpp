@@ -23,7 +23,10 @@ struct DynamicConfig {
   double detector_budget_ms = 0.0;  // ms tracking may wait for the current frame's detection
   int detector_threads = 1;         // OpenCV threads for inference (the other core tracks and maps)
   int detector_interval = 3;        // detect every N-th frame; boxes are carried by flow in between
-  dyn::DetectorConfig detector;     // used as given when the file sets `detector`, else from the model
+  // Scheduling niceness of the detector thread (0 = as tracking). 2 keeps tracking within +5 ms of
+  // culling-off on 2 cores; 5 and more starve the detector and stale boxes cost accuracy (docs/dynamic.md).
+  int detector_nice = 2;
+  dyn::DetectorConfig detector;  // used as given when the file sets `detector`, else from the model
   bool detector_configured = false;
   dyn::MotionCheckConfig motion;
   static DynamicConfig from_yaml(const ConfigReader& r);
