@@ -62,6 +62,8 @@ struct RunArgs {
   std::string detector_model;
   std::string keyframe_policy;
   std::string loop_detector;
+  std::string save_map;
+  std::string load_map;
 };
 
 std::filesystem::path default_dataset() {
@@ -110,6 +112,8 @@ int run(const RunArgs& args) {
   options.project_root = SP_SOURCE_DIR;
   options.stop = &interrupt.flag();
   options.label = dataset.filename().string();
+  if (!args.load_map.empty()) options.load_map = args.load_map;
+  if (!args.save_map.empty()) options.save_map = args.save_map;
   options.extra_stats["dataset"] = dataset.string();
   options.extra_stats["config"] = config_file.string();
   const auto result = pipeline::run_slam(*source, config, options);
@@ -130,6 +134,18 @@ int run(const RunArgs& args) {
   }
   fmt::print("outputs: {}/trajectory.txt, keyframes.txt, stats.json{}\n", args.out,
              result.ate_rmse ? ", trajectory.png" : "");
+  if (s.contains("map_loaded")) {
+    const auto& m = s["map_loaded"];
+    fmt::print("map loaded: {} keyframes, {} points; first relocalised frame: {}\n", m.value("keyframes", 0),
+               m.value("points", 0),
+               m["first_relocalization_frame"].is_null() ? std::string("none")
+                                                         : m["first_relocalization_frame"].dump());
+  }
+  if (s.contains("map_saved")) {
+    const auto& m = s["map_saved"];
+    fmt::print("map saved: {} ({} keyframes, {} points, {:.1f} MB)\n", m.value("file", std::string()),
+               m.value("keyframes", 0), m.value("points", 0), m.value("bytes", 0.0) / 1e6);
+  }
   return result.completed ? 0 : 1;
 }
 
@@ -156,6 +172,9 @@ void add_run_command(CLI::App& app) {
                   "YOLO model (.onnx, or Darknet .cfg with .weights)");
   cmd->add_option("--loop-detector", args->loop_detector, "Loop detection: off|bow-keyframe|bow-sequence")
       ->check(CLI::IsMember({"off", "bow-keyframe", "bow-sequence"}));
+  cmd->add_option("--save-map", args->save_map, "Save the map to this file at the end (docs/map_files.md)");
+  cmd->add_option("--load-map", args->load_map,
+                  "Relocalise in this saved map and extend it (instead of starting a new map)");
   cmd->add_option("--keyframe-policy", args->keyframe_policy, "heuristic|adaptive")
       ->check(CLI::IsMember({"heuristic", "adaptive"}));
   cmd->callback([args] {

@@ -101,6 +101,11 @@ LoopClosingStats LoopCloser::stats() const {
   return s;
 }
 
+void LoopCloser::add_existing_keyframes(const std::vector<KeyframeInfo>& keyframes) {
+  if (!detector_) return;
+  for (const KeyframeInfo& kf : keyframes) detector_->add_keyframe(kf);
+}
+
 void LoopCloser::process(map::KeyframeId kid) {
   if (!detector_) return;
   KeyframeInfo info;

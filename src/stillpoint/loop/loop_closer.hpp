@@ -55,6 +55,9 @@ class LoopCloser {
 
   // Handles one new keyframe (called in keyframe order by the loop-closing stage).
   void process(map::KeyframeId keyframe);
+  // Files the keyframes of a loaded map (BoW already computed, in id order) without detection, so
+  // new keyframes can close loops against them. Call before the first process().
+  void add_existing_keyframes(const std::vector<KeyframeInfo>& keyframes);
   // End of run: queries what the detector still holds (the open sequence), then waits for a
   // running global BA.
   void flush();

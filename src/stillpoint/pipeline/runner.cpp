@@ -56,6 +56,7 @@ RunResult run_slam(io::FrameSource& source, const SystemConfig& config, const Ru
   SlamSystem system(
       config, source.camera(),
       SystemOptions{options.deterministic, options.boxes_file, options.masks_dir, options.project_root});
+  if (options.load_map) system.load_map(*options.load_map);
   ProgressBar bar(options.label.empty() ? "tracking" : options.label, source.size_hint(), options.progress);
   Stopwatch wall;
   std::size_t done = 0;
@@ -86,6 +87,15 @@ RunResult run_slam(io::FrameSource& source, const SystemConfig& config, const Ru
   }
   bar.finish();
   system.finish();
+  if (options.save_map) {
+    // After finish(): local mapping and loop closing have drained, so the map is final.
+    try {
+      system.save_map(*options.save_map);
+    } catch (const std::exception& e) {
+      spdlog::error("map not saved: {}", e.what());
+      result.completed = false;
+    }
+  }
   const double seconds = wall.elapsed_ms() / 1000.0;
   const nlohmann::json run_stats = {{"wall_s", seconds},
                                     {"fps", static_cast<double>(done) / std::max(1e-9, seconds)},

@@ -23,6 +23,8 @@ struct RunOptions {
   const std::atomic<bool>* stop = nullptr;          // set asynchronously (SIGINT) to end the run early
   std::string label;                                // shown in the progress bar
   nlohmann::json extra_stats;                       // merged into stats.json (mode switches etc.)
+  std::optional<std::filesystem::path> load_map;    // relocalise in this saved map and extend it
+  std::optional<std::filesystem::path> save_map;    // save the map here at the end (also on early stop)
 };
 
 struct RunResult {

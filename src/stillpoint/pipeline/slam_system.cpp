@@ -1,6 +1,13 @@
 #include "stillpoint/pipeline/slam_system.hpp"
 
+#include <fmt/format.h>
 #include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <cmath>
+#include <opencv2/imgproc.hpp>
+
+#include "stillpoint/common/error.hpp"
 
 namespace sp::pipeline {
 
@@ -25,6 +32,7 @@ SlamSystem::SlamSystem(SystemConfig config, io::CameraConfig camera, const Syste
                frontend_.pyramid(), camera_.fps),
       mapper_(map_, config_.mapping, camera_.intrinsics, with_camera_range(config_.depth, camera_),
               frontend_.pyramid()) {
+  project_root_ = options.project_root;
   if (options.masks_dir && std::filesystem::is_directory(*options.masks_dir))
     culling_score_.emplace(*options.masks_dir);
   const track::DepthModel depth = with_camera_range(config_.depth, camera_);
@@ -35,6 +43,8 @@ SlamSystem::SlamSystem(SystemConfig config, io::CameraConfig camera, const Syste
     auto vocabulary = std::make_shared<const loop::Vocabulary>(loop::Vocabulary::load(vocab_file));
     vocabulary_load_ms_ = load.elapsed_ms();
     vocabulary_words_ = vocabulary->size();
+    vocabulary_ = vocabulary;
+    vocabulary_file_ = vocab_file;
     closer_ = std::make_unique<loop::LoopCloser>(map_, config_.loop, vocabulary, camera_.intrinsics, depth,
                                                  frontend_.pyramid(), deterministic_);
     loop_stage_ = std::make_unique<LoopClosingStage>(*closer_, times_, config_.pipeline.loop_queue);
@@ -50,6 +60,159 @@ SlamSystem::SlamSystem(SystemConfig config, io::CameraConfig camera, const Syste
 }
 
 SlamSystem::~SlamSystem() { finish(); }
+
+namespace {
+// Whole-image similarity for relocalisation without a vocabulary: 32x24 grey thumbnails, zero mean,
+// unit norm, so the dot product is the normalised cross-correlation.
+cv::Mat tiny_image(const cv::Mat& thumbnail) {
+  if (thumbnail.empty()) return {};
+  cv::Mat grey, small, f;
+  if (thumbnail.channels() == 3) {
+    cv::cvtColor(thumbnail, grey, cv::COLOR_BGR2GRAY);
+  } else {
+    grey = thumbnail;
+  }
+  cv::resize(grey, small, cv::Size(32, 24), 0, 0, cv::INTER_AREA);
+  small.convertTo(f, CV_32F);
+  f -= cv::mean(f)[0];
+  const double n = cv::norm(f);
+  if (n > 0) f /= n;
+  return f;
+}
+}  // namespace
+
+void SlamSystem::load_map(const std::filesystem::path& file) {
+  if (frames_ > 0) throw Error("load_map: the system has already processed frames");
+  Stopwatch watch;
+  const map::MapFileInfo info = map::load_map(file, map_);
+  const double load_ms = watch.elapsed_ms();
+  // The map's keypoints, octaves and depths only mean something for the camera and pyramid it was
+  // built with.
+  const geo::CameraIntrinsics& c = camera_.intrinsics;
+  const geo::CameraIntrinsics& m = info.camera;
+  const auto differs = [](double a, double b) { return std::abs(a - b) > 1e-6 * std::max(1.0, std::abs(b)); };
+  if (c.width != m.width || c.height != m.height || differs(c.fx, m.fx) || differs(c.fy, m.fy) ||
+      differs(c.cx, m.cx) || differs(c.cy, m.cy)) {
+    throw InputError(
+        file.string(), 0,
+        fmt::format("the map was built for a {}x{} camera (fx {} fy {} cx {} cy {}), this run's camera "
+                    "is {}x{} (fx {} fy {} cx {} cy {})",
+                    m.width, m.height, m.fx, m.fy, m.cx, m.cy, c.width, c.height, c.fx, c.fy, c.cx, c.cy));
+  }
+  const map::ScalePyramid pyramid = frontend_.pyramid();
+  if (pyramid.levels != info.pyramid_levels || differs(pyramid.scale_factor, info.pyramid_scale_factor)) {
+    throw InputError(
+        file.string(), 0,
+        fmt::format("the map was built with an ORB pyramid of {} levels x {}, the configuration has {} x {}",
+                    info.pyramid_levels, info.pyramid_scale_factor, pyramid.levels, pyramid.scale_factor));
+  }
+  // Relocalisation wants a vocabulary even when loop detection is off.
+  if (!vocabulary_) {
+    std::filesystem::path vocab_file = config_.loop.vocabulary;
+    if (vocab_file.is_relative()) vocab_file = project_root_ / vocab_file;
+    try {
+      vocabulary_ = std::make_shared<const loop::Vocabulary>(loop::Vocabulary::load(vocab_file));
+      vocabulary_file_ = vocab_file;
+    } catch (const Error& e) {
+      spdlog::warn("no vocabulary for relocalisation ({}): candidates are ranked by whole-image similarity",
+                   e.what());
+    }
+  }
+  if (vocabulary_ && !info.vocabulary_name.empty()) {
+    const std::uint64_t checksum = map::vocabulary_fingerprint(vocabulary_file_);
+    if (checksum != info.vocabulary_checksum || vocabulary_->size() != info.vocabulary_words) {
+      // BoW vectors are not stored in the file, so this is not fatal: they are recomputed below.
+      spdlog::warn(
+          "{}: the map was built with vocabulary {} ({} words, checksum {:016x}); "
+          "this run uses {} ({} words, checksum {:016x}); BoW vectors are recomputed with it",
+          file.string(), info.vocabulary_name, info.vocabulary_words, info.vocabulary_checksum,
+          vocabulary_file_.filename().string(), vocabulary_->size(), checksum);
+    }
+  }
+  std::vector<loop::KeyframeInfo> keyframes;
+  std::size_t points = 0;
+  {
+    map::MapView view = map_.view();
+    for (map::KeyframeId id : view.keyframe_ids_sorted()) {
+      const map::Keyframe* kf = view.keyframe(id);
+      loop::KeyframeInfo k;
+      k.id = id;
+      k.R_cw = kf->T_cw.rotation();
+      keyframes.push_back(std::move(k));
+    }
+    points = view.live_points();
+  }
+  tracker_.start_in_existing_map();
+  Stopwatch bow_watch;
+  std::string candidates = "thumbnail";
+  if (vocabulary_) {
+    reloc_db_ = std::make_unique<loop::KeyframeDatabase>();
+    for (loop::KeyframeInfo& k : keyframes) {
+      cv::Mat descriptors;
+      {
+        map::MapView view = map_.view();
+        descriptors = view.keyframe(k.id)->features.descriptors;
+      }
+      k.bow = vocabulary_->transform(descriptors);
+      reloc_db_->add(k.id, k.bow);
+    }
+    if (closer_) closer_->add_existing_keyframes(keyframes);
+    candidates = "bow";
+    tracker_.set_relocalization_candidates(
+        [vocabulary = vocabulary_, db = reloc_db_.get(), n = config_.tracker.relocalization_candidates](
+            map::MapView&, const track::Frame& frame) {
+          // ORB-SLAM's relocalisation query: keyframes sharing at least 80 % of the most shared words.
+          const auto hits = db->query(vocabulary->transform(frame.features.descriptors), 0.8);
+          std::vector<map::KeyframeId> out;
+          for (std::size_t i = 0; i < hits.size() && i < n; ++i) out.push_back(hits[i].id);
+          return out;
+        });
+  } else {
+    tracker_.set_relocalization_candidates(
+        [n = config_.tracker.relocalization_candidates](map::MapView& view, const track::Frame& frame) {
+          const cv::Mat query = tiny_image(frame.thumbnail);
+          std::vector<std::pair<double, map::KeyframeId>> scored;
+          for (map::KeyframeId id : view.keyframe_ids_sorted()) {
+            const cv::Mat t = tiny_image(view.keyframe(id)->thumbnail);
+            const double s = query.empty() || t.empty() ? -1.0 : query.dot(t);
+            scored.emplace_back(-s, id);
+          }
+          std::sort(scored.begin(), scored.end());
+          std::vector<map::KeyframeId> out;
+          for (std::size_t i = 0; i < scored.size() && i < n; ++i) out.push_back(scored[i].second);
+          return out;
+        });
+  }
+  map_file_stats_["map_loaded"] = {
+      {"file", file.string()}, {"keyframes", keyframes.size()},    {"points", points},
+      {"load_ms", load_ms},    {"bow_ms", bow_watch.elapsed_ms()}, {"relocalization_candidates", candidates}};
+  spdlog::info("loaded map {}: {} keyframes, {} points in {:.0f} ms; relocalising in it", file.string(),
+               keyframes.size(), points, load_ms);
+}
+
+map::MapSaveResult SlamSystem::save_map(const std::filesystem::path& file) {
+  map::MapFileInfo info;
+  info.camera = camera_.intrinsics;
+  const map::ScalePyramid pyramid = frontend_.pyramid();
+  info.pyramid_levels = pyramid.levels;
+  info.pyramid_scale_factor = pyramid.scale_factor;
+  if (vocabulary_) {
+    info.vocabulary_name = vocabulary_file_.filename().string();
+    info.vocabulary_words = vocabulary_->size();
+    info.vocabulary_checksum = map::vocabulary_fingerprint(vocabulary_file_);
+  }
+  Stopwatch watch;
+  const map::MapSaveResult r = map::save_map(map_, file, info);
+  const double ms = watch.elapsed_ms();
+  map_file_stats_["map_saved"] = {{"file", file.string()},
+                                  {"keyframes", r.keyframes},
+                                  {"points", r.points},
+                                  {"bytes", r.bytes},
+                                  {"save_ms", ms}};
+  spdlog::info("saved map {}: {} keyframes, {} points, {:.1f} MB in {:.0f} ms", file.string(), r.keyframes,
+               r.points, static_cast<double>(r.bytes) / 1e6, ms);
+  return r;
+}
 
 bool SlamSystem::failed() const { return mapping_stage_->failed() || (loop_stage_ && loop_stage_->failed()); }
 
@@ -152,6 +315,11 @@ nlohmann::json SlamSystem::statistics() {
   }
   j["peak_rss_mib"] = peak_rss_mib();
   j["deterministic"] = deterministic_;
+  for (const auto& [k, v] : map_file_stats_.items()) j[k] = v;
+  if (j.contains("map_loaded")) {
+    const auto first = tracker_.first_relocalization_frame();
+    j["map_loaded"]["first_relocalization_frame"] = first ? nlohmann::json(*first) : nlohmann::json(nullptr);
+  }
   return j;
 }
 

@@ -10,7 +10,9 @@
 #include "stillpoint/io/camera_config.hpp"
 #include "stillpoint/io/frame.hpp"
 #include "stillpoint/io/trajectory_io.hpp"
+#include "stillpoint/loop/keyframe_database.hpp"
 #include "stillpoint/map/map.hpp"
+#include "stillpoint/map/map_file.hpp"
 #include "stillpoint/pipeline/culling_score.hpp"
 #include "stillpoint/pipeline/dynamic_culling.hpp"
 #include "stillpoint/pipeline/frontend.hpp"
@@ -42,6 +44,14 @@ class SlamSystem {
   SlamSystem(const SlamSystem&) = delete;
   SlamSystem& operator=(const SlamSystem&) = delete;
 
+  // Loads a saved map (map_file.hpp) before the first frame: the tracker relocalises in it and extends
+  // it, relocalisation candidates come from a BoW database over its keyframes (or, without a
+  // vocabulary, a whole-image score), and the loop closer knows its keyframes. Throws sp::InputError
+  // for a damaged file or one built for another camera or ORB pyramid.
+  void load_map(const std::filesystem::path& file);
+  // Saves the live map (call after finish()). Throws sp::Error when the file cannot be written.
+  map::MapSaveResult save_map(const std::filesystem::path& file);
+
   FrameReport process(const io::FrameData& frame);
   // Waits for the background stages to finish their queues and stops them.
   void finish();
@@ -72,6 +82,11 @@ class SlamSystem {
   bool finished_ = false;
   double vocabulary_load_ms_ = 0;
   std::size_t vocabulary_words_ = 0;
+  std::filesystem::path project_root_;
+  std::shared_ptr<const loop::Vocabulary> vocabulary_;
+  std::filesystem::path vocabulary_file_;
+  std::unique_ptr<loop::KeyframeDatabase> reloc_db_;  // loaded keyframes, for relocalisation
+  nlohmann::json map_file_stats_ = nlohmann::json::object();
 };
 
 }  // namespace sp::pipeline

@@ -52,6 +52,14 @@ Tracker::Tracker(map::Map& map, TrackerConfig config, geo::CameraIntrinsics came
       policy_(make_keyframe_policy(config_.keyframes)),
       camera_model_{camera.fx, camera.fy, camera.cx, camera.cy, depth.bf} {}
 
+void Tracker::start_in_existing_map() {
+  // Lost, not NotInitialized: the next frames go through relocalize() and never create a map at
+  // the identity, so the loaded map's frame stays the world frame.
+  state_ = TrackingState::Lost;
+  reference_ = map::kNoKeyframe;
+  velocity_.reset();
+}
+
 TrackOutcome Tracker::track(Frame& frame, const MappingStatus& mapping) {
   TrackOutcome out;
   frame.reset_matches();
@@ -279,6 +287,13 @@ bool Tracker::relocalize(map::MapView& view, Frame& frame) {
   for (map::KeyframeId k : view.best_covisibles(reference_, 10)) {
     if (std::find(candidates.begin(), candidates.end(), k) == candidates.end()) candidates.push_back(k);
   }
+  if (reloc_candidates_) {
+    std::vector<map::KeyframeId> first = reloc_candidates_(view, frame);
+    for (map::KeyframeId k : candidates) {
+      if (std::find(first.begin(), first.end(), k) == first.end()) first.push_back(k);
+    }
+    candidates = std::move(first);
+  }
   for (map::KeyframeId kid : candidates) {
     const map::Keyframe* kf = view.keyframe(kid);
     if (kf == nullptr || kf->bad) continue;
@@ -322,6 +337,7 @@ bool Tracker::relocalize(map::MapView& view, Frame& frame) {
       reference_ = kid;
       last_reloc_frame_ = frame.index;
       ++relocalizations_;
+      if (!first_reloc_frame_) first_reloc_frame_ = frame.index;
       spdlog::info("relocalised frame {} against keyframe {}", frame.index, kid);
       return true;
     }

@@ -2,6 +2,7 @@
 // Frame-to-map tracking: constant-velocity prediction, reference-keyframe fallback, relocalisation,
 // local-map tracking and the keyframe decision. Runs in the tracking thread; touches the map only
 // through short MapViews.
+#include <functional>
 #include <memory>
 #include <optional>
 #include <vector>
@@ -44,12 +45,25 @@ struct TrackOutcome {
   bool relocalized = false;
 };
 
+// Relocalisation candidates from anywhere in the map (a BoW keyframe database, a whole-image score),
+// best first. Called with the tracker's map view held: it must not take the map lock itself.
+using RelocalizationCandidates = std::function<std::vector<map::KeyframeId>(map::MapView&, const Frame&)>;
+
 class Tracker {
  public:
   Tracker(map::Map& map, TrackerConfig config, geo::CameraIntrinsics camera, DepthModel depth,
           map::ScalePyramid pyramid, double fps);
 
   TrackOutcome track(Frame& frame, const MappingStatus& mapping);
+
+  // The map holds a loaded map: frames relocalise in it instead of starting a new map, and count as
+  // lost until one does. Call before the first frame.
+  void start_in_existing_map();
+  // Candidates tried before the recent keyframes when relocalising (unset: recent keyframes only).
+  void set_relocalization_candidates(RelocalizationCandidates provider) {
+    reloc_candidates_ = std::move(provider);
+  }
+  [[nodiscard]] std::optional<std::size_t> first_relocalization_frame() const { return first_reloc_frame_; }
 
   [[nodiscard]] TrackingState state() const { return state_; }
   [[nodiscard]] std::size_t lost_frames() const { return lost_frames_; }
@@ -92,6 +106,8 @@ class Tracker {
   std::vector<map::PointId> local_points_;
   std::size_t lost_frames_ = 0;
   std::size_t relocalizations_ = 0;
+  RelocalizationCandidates reloc_candidates_;
+  std::optional<std::size_t> first_reloc_frame_;
   TrajectoryRecorder trajectory_;
 };
 
