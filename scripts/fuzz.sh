@@ -15,7 +15,7 @@ JOBS="${JOBS:-1}"
 NICE="${NICE:-19}"
 TARGETS=("$@")
 if [ ${#TARGETS[@]} -eq 0 ]; then
-  TARGETS=(fuzz_tum_text fuzz_trajectory fuzz_config fuzz_vocabulary fuzz_boxes)
+  TARGETS=(fuzz_tum_text fuzz_trajectory fuzz_config fuzz_vocabulary fuzz_boxes fuzz_map_file)
 fi
 
 command -v clang++ >/dev/null || { echo "clang++ not found: apt-get install clang libclang-rt-14-dev" >&2; exit 2; }

@@ -7,6 +7,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 
 #include "stillpoint/common/error.hpp"
 #include "stillpoint/io/trajectory_io.hpp"
@@ -32,14 +33,15 @@ std::filesystem::path scratch(const std::string& name) {
 
 RunResult run_part(std::size_t start, std::size_t frames, const std::filesystem::path& out,
                    const std::optional<std::filesystem::path>& load,
-                   const std::optional<std::filesystem::path>& save, std::size_t reloc_candidates = 0) {
+                   const std::optional<std::filesystem::path>& save,
+                   const std::function<void(SystemConfig&)>& tweak = {}) {
   io::TumSequenceOptions seq;
   seq.start_frame = start;
   seq.max_frames = frames;
   io::TumSequence source(kSequence, seq);
   SystemConfig config = SystemConfig::load(kConfig);
   config.dynamic.mode = "oracle";
-  if (reloc_candidates > 0) config.tracker.relocalization_candidates = reloc_candidates;
+  if (tweak) tweak(config);
   RunOptions options;
   options.out_dir = out;
   options.deterministic = true;
@@ -164,7 +166,8 @@ TEST(MapReuse, SecondRunRelocalisesInTheSavedMapAndContinuesInItsFrame) {
 
   // 5. Back at the start of the sequence with few recent-keyframe candidates: the BoW database over
   // the loaded keyframes has to find the early keyframes (the recent ones were taken ~0.3 m away).
-  const RunResult again = run_part(0, 40, dir / "again", map_file, std::nullopt, /*reloc_candidates=*/2);
+  const RunResult again = run_part(0, 40, dir / "again", map_file, std::nullopt,
+                                   [](SystemConfig& c) { c.tracker.relocalization_candidates = 2; });
   ASSERT_TRUE(again.completed);
   EXPECT_EQ(again.stats["map_loaded"]["relocalization_candidates"].get<std::string>(), "bow");
   ASSERT_FALSE(again.stats["map_loaded"]["first_relocalization_frame"].is_null());
@@ -173,6 +176,20 @@ TEST(MapReuse, SecondRunRelocalisesInTheSavedMapAndContinuesInItsFrame) {
       check_in_first_frame(dir / "first" / "trajectory.txt", dir / "again" / "trajectory.txt");
   RecordProperty("unaligned_rmse_again_mm", static_cast<int>(1000 * c2.unaligned_rmse));
   EXPECT_LT(c2.unaligned_rmse, 0.03);
+
+  // 6. Without a vocabulary the candidates are all keyframes ranked by thumbnail similarity.
+  const RunResult plain = run_part(0, 30, dir / "plain", map_file, std::nullopt, [](SystemConfig& c) {
+    c.loop.detector = "off";
+    c.loop.vocabulary = "does/not/exist.spv";
+    c.tracker.relocalization_candidates = 2;
+  });
+  ASSERT_TRUE(plain.completed);
+  EXPECT_EQ(plain.stats["map_loaded"]["relocalization_candidates"].get<std::string>(), "thumbnail");
+  ASSERT_FALSE(plain.stats["map_loaded"]["first_relocalization_frame"].is_null());
+  EXPECT_LE(plain.stats["map_loaded"]["first_relocalization_frame"].get<std::size_t>(), 5U);
+  const FrameCheck c3 =
+      check_in_first_frame(dir / "first" / "trajectory.txt", dir / "plain" / "trajectory.txt");
+  EXPECT_LT(c3.unaligned_rmse, 0.03);
 }
 
 TEST(MapReuse, DamagedMapIsRefusedBeforeTheFirstFrame) {
