@@ -64,6 +64,7 @@ struct RunArgs {
   std::string loop_detector;
   std::string save_map;
   std::string load_map;
+  bool dense_cloud = false;
 };
 
 std::filesystem::path default_dataset() {
@@ -114,6 +115,7 @@ int run(const RunArgs& args) {
   options.label = dataset.filename().string();
   if (!args.load_map.empty()) options.load_map = args.load_map;
   if (!args.save_map.empty()) options.save_map = args.save_map;
+  options.dense_cloud = args.dense_cloud;
   options.extra_stats["dataset"] = dataset.string();
   options.extra_stats["config"] = config_file.string();
   const auto result = pipeline::run_slam(*source, config, options);
@@ -132,8 +134,8 @@ int run(const RunArgs& args) {
     fmt::print("ATE RMSE {:.4f} m | RPE trans RMSE {:.4f} m, rot RMSE {:.3f} deg (delta 1 s)\n",
                *result.ate_rmse, e["rpe_trans"].value("rmse", 0.0), e["rpe_rot_deg"].value("rmse", 0.0));
   }
-  fmt::print("outputs: {}/trajectory.txt, keyframes.txt, stats.json{}\n", args.out,
-             result.ate_rmse ? ", trajectory.png" : "");
+  fmt::print("outputs: {}/trajectory.txt, keyframes.txt, stats.json, map_points.ply{}{}, culled/\n", args.out,
+             args.dense_cloud ? ", dense_cloud.ply" : "", result.ate_rmse ? ", trajectory.png" : "");
   if (s.contains("map_loaded")) {
     const auto& m = s["map_loaded"];
     fmt::print("map loaded: {} keyframes, {} points; first relocalised frame: {}\n", m.value("keyframes", 0),
@@ -166,6 +168,8 @@ void add_run_command(CLI::App& app) {
                 "Fixed seeds, stages in lock-step: identical output twice");
   cmd->add_option("--max-frames", args->max_frames, "Stop after this many frames (0 = all)");
   cmd->add_flag("--no-progress", args->no_progress, "No progress bar");
+  cmd->add_flag("--dense-cloud", args->dense_cloud,
+                "Also write dense_cloud.ply from keyframe depth (dynamic regions removed)");
   cmd->add_option("--dynamic", args->dynamic, "Dynamic culling: off|flow|detector|detector+flow|oracle|auto")
       ->check(CLI::IsMember({"off", "flow", "detector", "detector+flow", "oracle", "auto"}));
   cmd->add_option("--detector-model", args->detector_model,

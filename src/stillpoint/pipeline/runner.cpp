@@ -35,6 +35,12 @@ void write_outputs(SlamSystem& system, const RunOptions& options, const nlohmann
   result.stats["completed"] = result.completed;
   for (const auto& [k, v] : options.extra_stats.items()) result.stats[k] = v;
   for (const auto& [k, v] : run_stats.items()) result.stats[k] = v;
+  try {
+    const nlohmann::json artifacts = system.write_artifacts();
+    if (!artifacts.empty()) result.stats["artifacts"] = artifacts;
+  } catch (const std::exception& e) {
+    spdlog::warn("run artifacts (PLY, thumbnails) not written: {}", e.what());
+  }
   if (options.groundtruth && trajectory.size() >= 3) {
     try {
       const auto gt = io::read_tum_trajectory(*options.groundtruth);
@@ -53,9 +59,17 @@ void write_outputs(SlamSystem& system, const RunOptions& options, const nlohmann
 
 RunResult run_slam(io::FrameSource& source, const SystemConfig& config, const RunOptions& options) {
   RunResult result;
-  SlamSystem system(
-      config, source.camera(),
-      SystemOptions{options.deterministic, options.boxes_file, options.masks_dir, options.project_root});
+  SystemOptions system_options;
+  system_options.deterministic = options.deterministic;
+  system_options.boxes_file = options.boxes_file;
+  system_options.masks_dir = options.masks_dir;
+  system_options.project_root = options.project_root;
+  if (options.artifacts) {
+    system_options.artifacts.out_dir = options.out_dir;
+    system_options.artifacts.expected_frames = source.size_hint();
+    system_options.artifacts.dense_cloud = options.dense_cloud;
+  }
+  SlamSystem system(config, source.camera(), system_options);
   if (options.load_map) system.load_map(*options.load_map);
   ProgressBar bar(options.label.empty() ? "tracking" : options.label, source.size_hint(), options.progress);
   Stopwatch wall;

@@ -25,6 +25,8 @@ struct RunOptions {
   nlohmann::json extra_stats;                       // merged into stats.json (mode switches etc.)
   std::optional<std::filesystem::path> load_map;    // relocalise in this saved map and extend it
   std::optional<std::filesystem::path> save_map;    // save the map here at the end (also on early stop)
+  bool artifacts = true;     // map_points.ply and culled/ thumbnails (run_artifacts.hpp)
+  bool dense_cloud = false;  // also dense_cloud.ply from keyframe depth, dynamic regions removed
 };
 
 struct RunResult {

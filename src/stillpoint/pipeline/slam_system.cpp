@@ -31,7 +31,8 @@ SlamSystem::SlamSystem(SystemConfig config, io::CameraConfig camera, const Syste
       tracker_(map_, config_.tracker, camera_.intrinsics, with_camera_range(config_.depth, camera_),
                frontend_.pyramid(), camera_.fps),
       mapper_(map_, config_.mapping, camera_.intrinsics, with_camera_range(config_.depth, camera_),
-              frontend_.pyramid()) {
+              frontend_.pyramid()),
+      artifacts_(options.artifacts, camera_.intrinsics) {
   project_root_ = options.project_root;
   if (options.masks_dir && std::filesystem::is_directory(*options.masks_dir))
     culling_score_.emplace(*options.masks_dir);
@@ -223,14 +224,15 @@ FrameReport SlamSystem::process(const io::FrameData& data) {
   ExtractedFeatures features = frontend_.extract(data);
   times_.add("extract", watch.elapsed_ms());
   std::vector<bool> dynamic;
+  CullingOutput culled;
   if (culling_.enabled()) {
     watch.restart();
-    CullingOutput culled =
-        culling_.process(data, features.gray, features.keypoints, tracker_.predicted_motion());
+    culled = culling_.process(data, features.gray, features.keypoints, tracker_.predicted_motion());
     times_.add("dynamic", watch.elapsed_ms());
     if (culled.detection_used && culled.detector_ms > 0) times_.add("detector", culled.detector_ms);
     dynamic = std::move(culled.drop);
   }
+  artifacts_.on_frame(data, features.keypoints, dynamic, culled.result.boxes, culled.result.box_dynamic);
   if (culling_score_) culling_score_->add(data.rgb_path, features.keypoints, dynamic);
   track::Frame frame = frontend_.assemble(data, std::move(features), dynamic);
   culled_total_ += frame.culled;
@@ -243,6 +245,7 @@ FrameReport SlamSystem::process(const io::FrameData& data) {
     ++keyframes_created_;
     if (!mapping.idle) mapping_stage_->interrupt_ba();
     mapping_stage_->submit(outcome.new_keyframe);
+    artifacts_.on_keyframe(outcome.new_keyframe, data);
   }
   times_.add("frame", frame_watch.elapsed_ms());
   ++frames_;
@@ -256,6 +259,11 @@ void SlamSystem::finish() {
   mapping_stage_->stop();  // drains into the loop stage
   if (loop_stage_) loop_stage_->stop();
   if (closer_) closer_->flush();
+}
+
+nlohmann::json SlamSystem::write_artifacts() {
+  map::MapView view = map_.view();
+  return artifacts_.write(view);
 }
 
 std::vector<io::StampedPose> SlamSystem::trajectory() {

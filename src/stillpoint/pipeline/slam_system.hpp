@@ -18,6 +18,7 @@
 #include "stillpoint/pipeline/frontend.hpp"
 #include "stillpoint/pipeline/local_mapping_stage.hpp"
 #include "stillpoint/pipeline/loop_closing_stage.hpp"
+#include "stillpoint/pipeline/run_artifacts.hpp"
 #include "stillpoint/pipeline/system_config.hpp"
 
 namespace sp::pipeline {
@@ -35,6 +36,7 @@ struct SystemOptions {
   std::optional<std::filesystem::path> boxes_file;  // oracle detections (dynsynth boxes.txt)
   std::optional<std::filesystem::path> masks_dir;   // score culling against ground-truth masks
   std::filesystem::path project_root = ".";         // relative resource paths (vocabulary) resolve here
+  ArtifactOptions artifacts;  // PLY clouds and culled-feature thumbnails (off by default)
 };
 
 class SlamSystem {
@@ -59,6 +61,8 @@ class SlamSystem {
   [[nodiscard]] std::vector<io::StampedPose> trajectory();
   [[nodiscard]] std::vector<io::StampedPose> keyframe_trajectory();
   [[nodiscard]] nlohmann::json statistics();
+  // Writes map_points.ply, dense_cloud.ply and culled/index.json (when enabled); figures for stats.json.
+  nlohmann::json write_artifacts();
   [[nodiscard]] StageTimes& times() { return times_; }
   [[nodiscard]] bool failed() const;
 
@@ -82,6 +86,7 @@ class SlamSystem {
   bool finished_ = false;
   double vocabulary_load_ms_ = 0;
   std::size_t vocabulary_words_ = 0;
+  RunArtifacts artifacts_;
   std::filesystem::path project_root_;
   std::shared_ptr<const loop::Vocabulary> vocabulary_;
   std::filesystem::path vocabulary_file_;
