@@ -6,6 +6,8 @@ PACKAGES=(
   libopencv-dev libeigen3-dev libceres-dev libtorch-dev
   libyaml-cpp-dev libspdlog-dev libfmt-dev libcli11-dev nlohmann-json3-dev
   libgtest-dev libgmock-dev libbenchmark-dev libopenni2-dev
+  chromium nodejs  # report: headless-browser test; npm fetches three.js at build time
+  $(command -v npm >/dev/null || echo npm)  # NodeSource's nodejs ships npm and conflicts with Debian's
 )
 missing=()
 for p in "${PACKAGES[@]}"; do
