@@ -73,7 +73,8 @@ std::vector<Variant> variants_for(const std::string& ablation) {
   if (ablation == "loop") {
     return {{"loop:off", {"--loop-detector", "off"}},
             {"loop:bow-keyframe", {"--loop-detector", "bow-keyframe"}},
-            {"loop:bow-sequence", {"--loop-detector", "bow-sequence"}}};
+            {"loop:bow-sequence", {"--loop-detector", "bow-sequence"}},
+            {"loop:netvlad", {"--loop-detector", "netvlad"}}};
   }
   throw Error("unknown ablation '" + ablation + "' (none|dynamic|keyframes|loop)");
 }

@@ -174,8 +174,9 @@ void add_run_command(CLI::App& app) {
       ->check(CLI::IsMember({"off", "flow", "detector", "detector+flow", "oracle", "auto"}));
   cmd->add_option("--detector-model", args->detector_model,
                   "YOLO model (.onnx, or Darknet .cfg with .weights)");
-  cmd->add_option("--loop-detector", args->loop_detector, "Loop detection: off|bow-keyframe|bow-sequence")
-      ->check(CLI::IsMember({"off", "bow-keyframe", "bow-sequence"}));
+  cmd->add_option("--loop-detector", args->loop_detector,
+                  "Loop detection: off|bow-keyframe|bow-sequence|netvlad")
+      ->check(CLI::IsMember({"off", "bow-keyframe", "bow-sequence", "netvlad"}));
   cmd->add_option("--save-map", args->save_map, "Save the map to this file at the end (docs/map_files.md)");
   cmd->add_option("--load-map", args->load_map,
                   "Relocalise in this saved map and extend it (instead of starting a new map)");

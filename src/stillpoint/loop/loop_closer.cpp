@@ -7,6 +7,7 @@
 #include <unordered_map>
 #include <unordered_set>
 
+#include "stillpoint/common/error.hpp"
 #include "stillpoint/common/timing.hpp"
 #include "stillpoint/features/matching.hpp"
 #include "stillpoint/geometry/ransac_se3.hpp"
@@ -18,7 +19,8 @@ namespace sp::loop {
 
 LoopClosingConfig LoopClosingConfig::from_yaml(const ConfigReader& r) {
   LoopClosingConfig c;
-  r.read_choice("detector", c.detector, {"off", "bow-keyframe", "bow-sequence"});
+  r.read_choice("detector", c.detector, {"off", "bow-keyframe", "bow-sequence", "netvlad"});
+  r.read("place_model", c.place_model);
   r.read("vocabulary", c.vocabulary);
   c.detection = LoopDetectorParams::from_yaml(r.section("detection"));
   r.read("min_keyframes", c.min_keyframes, std::size_t{2}, std::size_t{10000});
@@ -111,6 +113,7 @@ void LoopCloser::process(map::KeyframeId kid) {
   KeyframeInfo info;
   std::size_t keyframes = 0;
   cv::Mat descriptors;
+  cv::Mat thumbnail;
   {
     map::MapView view = map_.view();
     const map::Keyframe* kf = view.keyframe(kid);
@@ -119,6 +122,16 @@ void LoopCloser::process(map::KeyframeId kid) {
     info.R_cw = kf->T_cw.rotation();
     keyframes = view.live_keyframes();
     descriptors = kf->features.descriptors.clone();
+    if (needs_global_descriptors()) thumbnail = kf->thumbnail.clone();
+  }
+  double global_ms = 0;
+  if (needs_global_descriptors()) {
+    if (!describe_) throw Error("loop detector 'netvlad' needs a place model (set_global_describer)");
+    if (thumbnail.empty())
+      throw Error("loop detector 'netvlad': keyframe " + std::to_string(kid) + " has no thumbnail");
+    Stopwatch global_watch;
+    info.global = describe_(thumbnail);
+    global_ms = global_watch.elapsed_ms();
   }
   // The BoW vector is the keyframe's description, shared by every detector (ORB-SLAM computes it in
   // local mapping); it is timed apart from detection, which is the database search itself.
@@ -139,6 +152,7 @@ void LoopCloser::process(map::KeyframeId kid) {
     stats_.keyframes++;
     stats_.detection_ms_total += watch.elapsed_ms();
     stats_.bow_ms_total += bow_ms;
+    stats_.global_ms_total += global_ms;
     stats_.candidates += candidates.size();
   }
   handle_candidates(candidates, kid);

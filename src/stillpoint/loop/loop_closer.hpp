@@ -4,6 +4,7 @@
 // correction (fuse the two sides, pose graph over the essential graph), and a global bundle
 // adjustment in a background thread that tracking never waits for and a newer loop aborts.
 #include <atomic>
+#include <functional>
 #include <memory>
 #include <mutex>
 #include <thread>
@@ -18,7 +19,9 @@
 namespace sp::loop {
 
 struct LoopClosingConfig {
-  std::string detector = "bow-keyframe";                     // off | bow-keyframe | bow-sequence
+  std::string detector = "bow-keyframe";  // off | bow-keyframe | bow-sequence | netvlad
+  // ParC_NetVLAD weights for the netvlad detector; relative paths: from the project root.
+  std::string place_model = "models/parc_netvlad/parc_netvlad_small.pt";
   std::string vocabulary = "data/vocab/stillpoint_orb.spv";  // relative paths: from the project root
   LoopDetectorParams detection;
   std::size_t min_keyframes = 10;    // no detection before the map has this many keyframes
@@ -39,6 +42,7 @@ struct LoopClosingStats {
   std::size_t queries = 0;         // database queries made by the detector
   double detection_ms_total = 0;   // candidate search in the database (not BoW, not verification)
   double bow_ms_total = 0;         // BoW conversion of the keyframes
+  double global_ms_total = 0;      // global (ParC_NetVLAD) descriptors of the keyframes
   double correction_ms_total = 0;
   std::size_t global_ba_runs = 0;
   std::size_t global_ba_aborted = 0;
@@ -52,6 +56,12 @@ class LoopCloser {
   ~LoopCloser();
   LoopCloser(const LoopCloser&) = delete;
   LoopCloser& operator=(const LoopCloser&) = delete;
+
+  // The netvlad detector's keyframe description (an image -> L2-normalised descriptor), provided by the
+  // integrator so this module does not depend on the network library. Set before the first process().
+  using GlobalDescriber = std::function<Eigen::VectorXf(const cv::Mat& bgr)>;
+  void set_global_describer(GlobalDescriber describe) { describe_ = std::move(describe); }
+  [[nodiscard]] bool needs_global_descriptors() const { return detector_ && detector_->name() == "netvlad"; }
 
   // Handles one new keyframe (called in keyframe order by the loop-closing stage).
   void process(map::KeyframeId keyframe);
@@ -85,6 +95,7 @@ class LoopCloser {
   map::ScalePyramid pyramid_;
   bool deterministic_;
   std::unique_ptr<LoopDetector> detector_;
+  GlobalDescriber describe_;
   std::size_t last_loop_keyframe_ = 0;
 
   mutable std::mutex stats_mutex_;

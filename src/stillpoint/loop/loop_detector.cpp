@@ -4,24 +4,37 @@
 #include <unordered_set>
 
 #include "stillpoint/common/error.hpp"
+#include "stillpoint/loop/global_descriptor_detector.hpp"
 
 namespace sp::loop {
 
 LoopDetectorParams LoopDetectorParams::from_yaml(const sp::ConfigReader& r) {
   LoopDetectorParams p;
-  r.read_choice("method", p.method, {"bow-keyframe", "bow-sequence"});
+  r.read_choice("method", p.method, {"bow-keyframe", "bow-sequence", "netvlad"});
   r.read("min_common_ratio", p.min_common_ratio, 0.01, 1.0);
   r.read("group_score_ratio", p.group_score_ratio, 0.01, 1.0);
   r.read("group_size", p.group_size, 1, 100);
   r.read("min_consistency", p.min_consistency, 1, 20);
   p.sequence = SequenceParams::from_yaml(r.section("sequence"));
+  p.global = GlobalDescriptorParams::from_yaml(r.section("global"));
+  return p;
+}
+
+GlobalDescriptorParams GlobalDescriptorParams::from_yaml(const sp::ConfigReader& r) {
+  GlobalDescriptorParams p;
+  r.read("max_distance_sq", p.max_distance_sq, 1e-6, 4.0);
+  r.read("top_k", p.top_k, 1, 50);
   return p;
 }
 
 void LoopDetectorParams::validate() const {
-  if (method != "bow-keyframe" && method != "bow-sequence") {
-    throw sp::Error("loop detector: unknown method '" + method + "' (bow-keyframe | bow-sequence)");
+  if (method != "bow-keyframe" && method != "bow-sequence" && method != "netvlad") {
+    throw sp::Error("loop detector: unknown method '" + method + "' (bow-keyframe | bow-sequence | netvlad)");
   }
+  if (!(global.max_distance_sq > 0.0 && global.max_distance_sq <= 4.0))
+    throw sp::Error("loop detector: global.max_distance_sq must be in (0, 4]");
+  if (global.top_k < 1 || global.top_k > 50)
+    throw sp::Error("loop detector: global.top_k must be in [1, 50]");
   if (!(min_common_ratio > 0.0 && min_common_ratio <= 1.0))
     throw sp::Error("loop detector: min_common_ratio");
   if (!(group_score_ratio > 0.0 && group_score_ratio <= 1.0))
@@ -38,6 +51,7 @@ std::unique_ptr<LoopDetector> make_loop_detector(const std::string& method,
   p.method = method;
   p.validate();
   if (method == "bow-sequence") return std::make_unique<SequenceLoopDetector>(p);
+  if (method == "netvlad") return std::make_unique<GlobalDescriptorLoopDetector>(p);
   return std::make_unique<KeyframeLoopDetector>(p);
 }
 

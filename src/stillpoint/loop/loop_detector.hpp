@@ -25,6 +25,7 @@ struct KeyframeInfo {
   KeyframeId id = 0;
   Eigen::Matrix3d R_cw = Eigen::Matrix3d::Identity();  // world-to-camera rotation
   BowVector bow;                                       // L1-normalised
+  Eigen::VectorXf global;  // learned global descriptor (netvlad detector only; empty otherwise)
 };
 
 struct LoopCandidate {
@@ -64,19 +65,28 @@ class LoopDetector {
   [[nodiscard]] virtual std::string name() const = 0;
 };
 
+// Learned global descriptors (method "netvlad"); descriptors are L2-normalised, so d² is in [0, 4].
+struct GlobalDescriptorParams {
+  double max_distance_sq = 1.2;  // candidates farther than this never count [d²], (0, 4]
+  int top_k = 3;                 // nearest survivors checked per query [count], 1..50
+  static GlobalDescriptorParams from_yaml(const sp::ConfigReader& r);
+};
+
 struct LoopDetectorParams {
-  std::string method = "bow-keyframe";  // bow-keyframe | bow-sequence
+  std::string method = "bow-keyframe";  // bow-keyframe | bow-sequence | netvlad
   double min_common_ratio = 0.8;        // candidates share >= ratio x the most shared words [-], (0, 1]
   double group_score_ratio = 0.75;      // group scores >= ratio x the best group score [-], (0, 1]
   int group_size = 10;                  // covisible keyframes in a candidate's score group [count], 1..100
   int min_consistency = 3;              // consecutive keyframes a candidate group must persist [count], 1..20
   SequenceParams sequence;              // bow-sequence only (YAML section "sequence")
+  GlobalDescriptorParams global;        // netvlad only (YAML section "global")
 
   static LoopDetectorParams from_yaml(const sp::ConfigReader& r);
   void validate() const;  // throws sp::Error
 };
 
-// method: "bow-keyframe" or "bow-sequence" (overrides params.method); anything else is an sp::Error.
+// method: "bow-keyframe", "bow-sequence" or "netvlad" (overrides params.method); anything else is an
+// sp::Error.
 std::unique_ptr<LoopDetector> make_loop_detector(const std::string& method, const LoopDetectorParams& params);
 std::unique_ptr<LoopDetector> make_loop_detector(const LoopDetectorParams& params);
 

@@ -3,6 +3,11 @@
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
+#include "stillpoint/common/error.hpp"
+#ifdef SP_HAVE_PLACE
+#include "stillpoint/place/descriptor.hpp"
+#endif
+
 #include <algorithm>
 #include <cmath>
 #include <opencv2/imgproc.hpp>
@@ -48,6 +53,7 @@ SlamSystem::SlamSystem(SystemConfig config, io::CameraConfig camera, const Syste
     vocabulary_file_ = vocab_file;
     closer_ = std::make_unique<loop::LoopCloser>(map_, config_.loop, vocabulary, camera_.intrinsics, depth,
                                                  frontend_.pyramid(), deterministic_);
+    if (closer_->needs_global_descriptors()) attach_place_model(options.project_root);
     loop_stage_ = std::make_unique<LoopClosingStage>(*closer_, times_, config_.pipeline.loop_queue);
   }
   LocalMappingStage::Downstream downstream;
@@ -61,6 +67,22 @@ SlamSystem::SlamSystem(SystemConfig config, io::CameraConfig camera, const Syste
 }
 
 SlamSystem::~SlamSystem() { finish(); }
+
+void SlamSystem::attach_place_model([[maybe_unused]] const std::filesystem::path& project_root) {
+#ifdef SP_HAVE_PLACE
+  std::filesystem::path model = config_.loop.place_model;
+  if (model.is_relative()) model = project_root / model;
+  Stopwatch load;
+  // One libtorch thread: the loop thread shares 2 cores with tracking, mapping and the detector.
+  auto extractor =
+      std::make_shared<place::PlaceDescriptorExtractor>(place::PlaceDescriptorExtractor::load(model, 1));
+  place_model_load_ms_ = load.elapsed_ms();
+  // Only the loop-closing thread calls it (the extractor is not thread-safe).
+  closer_->set_global_describer([extractor](const cv::Mat& bgr) { return extractor->describe(bgr); });
+#else
+  throw Error("loop detector 'netvlad' needs the place module (libtorch): this build has none");
+#endif
+}
 
 namespace {
 // Whole-image similarity for relocalisation without a vocabulary: 32x24 grey thumbnails, zero mean,
@@ -316,6 +338,10 @@ nlohmann::json SlamSystem::statistics() {
     j["loop_queries"] = ls.queries;
     j["loop_detection_ms_total"] = ls.detection_ms_total;
     j["loop_bow_ms_total"] = ls.bow_ms_total;
+    if (closer_->needs_global_descriptors()) {
+      j["loop_global_descriptor_ms_total"] = ls.global_ms_total;
+      j["place_model_load_ms"] = place_model_load_ms_;
+    }
     j["loop_correction_ms_total"] = ls.correction_ms_total;
     j["global_ba_runs"] = ls.global_ba_runs;
     j["vocabulary_words"] = vocabulary_words_;

@@ -67,6 +67,8 @@ class SlamSystem {
   [[nodiscard]] bool failed() const;
 
  private:
+  // Loads the ParC_NetVLAD model and hands the loop closer its keyframe describer (netvlad detector).
+  void attach_place_model(const std::filesystem::path& project_root);
   SystemConfig config_;
   io::CameraConfig camera_;
   bool deterministic_;
@@ -85,13 +87,14 @@ class SlamSystem {
   std::size_t keyframes_created_ = 0;
   bool finished_ = false;
   double vocabulary_load_ms_ = 0;
+  double place_model_load_ms_ = 0;
   std::size_t vocabulary_words_ = 0;
-  RunArtifacts artifacts_;
   std::filesystem::path project_root_;
   std::shared_ptr<const loop::Vocabulary> vocabulary_;
   std::filesystem::path vocabulary_file_;
   std::unique_ptr<loop::KeyframeDatabase> reloc_db_;  // loaded keyframes, for relocalisation
   nlohmann::json map_file_stats_ = nlohmann::json::object();
+  RunArtifacts artifacts_;
 };
 
 }  // namespace sp::pipeline
