@@ -277,7 +277,8 @@ std::string viewer_section(const RunData& run, const ViewerAssets& assets) {
     return h +
            "<div id=\"viewer\" data-viewer-status=\"unavailable\"><div class=\"viewer-msg\">3-D view "
            "unavailable: "
-           "built without three.js (npm was missing when StillPoint was built).</div></div>\n";
+           "built without three.js (npm was unavailable, or SP_REPORT_THREEJS=OFF, when StillPoint was "
+           "built).</div></div>\n";
   std::string notes;
   if (!run.map_points) notes += missing("no map_points.ply in the run folder: trajectories only");
   if (!run.groundtruth.empty() && !run.eval)
