@@ -7,6 +7,7 @@
 #include <bit>
 #include <cmath>
 #include <cstring>
+#include <ctime>
 #include <fstream>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -18,6 +19,14 @@
 namespace sp::pipeline {
 
 namespace {
+
+// CPU time of the calling thread: what we take from tracking, unlike wall time, which on a busy
+// machine mostly measures preemption.
+double thread_cpu_ms() {
+  timespec ts{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return static_cast<double>(ts.tv_sec) * 1e3 + static_cast<double>(ts.tv_nsec) * 1e-6;
+}
 
 template <typename T>
 void put_le(std::string& buf, T value) {
@@ -83,14 +92,31 @@ RunArtifacts::RunArtifacts(ArtifactOptions options, geo::CameraIntrinsics camera
     std::error_code ec;
     std::filesystem::remove_all(options_.out_dir / "culled", ec);
     std::filesystem::remove(options_.out_dir / "dense_cloud.ply", ec);
+    jobs_ = std::make_unique<BoundedQueue<Job>>(8);
+    writer_ = std::thread([this] {
+      while (auto job = jobs_->pop()) run_job(*job);
+    });
   }
+}
+
+RunArtifacts::~RunArtifacts() { stop_writer(); }
+
+void RunArtifacts::stop_writer() {
+  if (!writer_.joinable()) return;
+  jobs_->close();
+  writer_.join();
+}
+
+void RunArtifacts::submit(Job job) {
+  if (writer_.joinable() && jobs_->push(std::move(job))) return;
+  run_job(job);  // the writer has been stopped (write() was called): do it here
 }
 
 void RunArtifacts::on_frame(const io::FrameData& data, const std::vector<cv::KeyPoint>& keypoints,
                             const std::vector<bool>& dynamic, const std::vector<dyn::Detection>& boxes,
                             const std::vector<bool>& box_dynamic) {
   if (!enabled()) return;
-  Stopwatch watch;
+  const double cpu_start = thread_cpu_ms();
   if (options_.dense_cloud) {
     pending_culled_.clear();
     pending_boxes_.clear();
@@ -100,50 +126,65 @@ void RunArtifacts::on_frame(const io::FrameData& data, const std::vector<cv::Key
       if (box_dynamic[i]) pending_boxes_.push_back(boxes[i].box);
   }
   if (data.index % stride_ == 0 && !data.bgr.empty()) {
-    save_thumbnail(data, keypoints, dynamic, boxes, box_dynamic);
+    Thumbnail t{data.index, data.stamp, fmt::format("frame_{:06d}.jpg", data.index), keypoints.size(),
+                static_cast<std::size_t>(std::count(dynamic.begin(), dynamic.end(), true))};
+    Job job;
+    job.file = t.file;
+    job.bgr = data.bgr;
+    job.keypoints = keypoints;
+    job.dynamic = dynamic;
+    job.boxes = boxes;
+    job.box_dynamic = box_dynamic;
+    submit(std::move(job));
+    thumbnails_.push_back(std::move(t));
     thin_thumbnails();
   }
-  const double ms = watch.elapsed_ms();
+  const double ms = thread_cpu_ms() - cpu_start;
   tracking_ms_total_ += ms;
   tracking_ms_max_ = std::max(tracking_ms_max_, ms);
 }
 
-void RunArtifacts::save_thumbnail(const io::FrameData& data, const std::vector<cv::KeyPoint>& keypoints,
-                                  const std::vector<bool>& dynamic, const std::vector<dyn::Detection>& boxes,
-                                  const std::vector<bool>& box_dynamic) {
-  const double s = static_cast<double>(options_.thumbnail_width) / data.bgr.cols;
-  cv::Mat img;
-  cv::resize(data.bgr, img, cv::Size(options_.thumbnail_width, std::max(1, cvRound(data.bgr.rows * s))), 0, 0,
-             cv::INTER_AREA);
-  const cv::Scalar red(40, 40, 255), green(60, 220, 60), amber(0, 190, 255);
-  for (std::size_t i = 0; i < boxes.size(); ++i) {
-    const bool moving = i < box_dynamic.size() && box_dynamic[i];
-    const cv::Rect2f& b = boxes[i].box;
-    cv::rectangle(img,
-                  cv::Rect(cvRound(b.x * s), cvRound(b.y * s), cvRound(b.width * s), cvRound(b.height * s)),
-                  moving ? red : amber, 1, cv::LINE_AA);
-  }
-  std::size_t culled = 0;
-  // Kept features first so the red (culled) ones stay visible on top.
-  for (int pass = 0; pass < 2; ++pass) {
-    for (std::size_t i = 0; i < keypoints.size(); ++i) {
-      const bool is_dynamic = i < dynamic.size() && dynamic[i];
-      if (is_dynamic != (pass == 1)) continue;
-      if (is_dynamic) ++culled;
-      const cv::Point c(cvRound(keypoints[i].pt.x * s), cvRound(keypoints[i].pt.y * s));
-      cv::circle(img, c, is_dynamic ? 2 : 1, is_dynamic ? red : green, cv::FILLED, cv::LINE_AA);
-    }
-  }
+void RunArtifacts::run_job(Job& job) {
   const std::filesystem::path dir = options_.out_dir / "culled";
-  std::filesystem::create_directories(dir);
-  Thumbnail t{data.index, data.stamp, fmt::format("frame_{:06d}.jpg", data.index), keypoints.size(), culled};
-  std::vector<uchar> jpeg;
-  if (!cv::imencode(".jpg", img, jpeg, {cv::IMWRITE_JPEG_QUALITY, 80})) {
-    spdlog::warn("could not encode the thumbnail of frame {}", data.index);
+  std::error_code ec;
+  if (job.kind == Job::Kind::Remove) {
+    std::filesystem::remove(dir / job.file, ec);
     return;
   }
-  write_text(dir / t.file, std::string(jpeg.begin(), jpeg.end()));
-  thumbnails_.push_back(std::move(t));
+  if (job.kind == Job::Kind::Dense) {
+    keep_dense(job);
+    return;
+  }
+  try {
+    const double s = static_cast<double>(options_.thumbnail_width) / job.bgr.cols;
+    cv::Mat img;
+    cv::resize(job.bgr, img, cv::Size(options_.thumbnail_width, std::max(1, cvRound(job.bgr.rows * s))), 0, 0,
+               cv::INTER_AREA);
+    const cv::Scalar red(40, 40, 255), green(60, 220, 60), amber(0, 190, 255);
+    for (std::size_t i = 0; i < job.boxes.size(); ++i) {
+      const bool moving = i < job.box_dynamic.size() && job.box_dynamic[i];
+      const cv::Rect2f& b = job.boxes[i].box;
+      cv::rectangle(img,
+                    cv::Rect(cvRound(b.x * s), cvRound(b.y * s), cvRound(b.width * s), cvRound(b.height * s)),
+                    moving ? red : amber, 1, cv::LINE_AA);
+    }
+    // Kept features first so the red (culled) ones stay visible on top.
+    for (int pass = 0; pass < 2; ++pass) {
+      for (std::size_t i = 0; i < job.keypoints.size(); ++i) {
+        const bool is_dynamic = i < job.dynamic.size() && job.dynamic[i];
+        if (is_dynamic != (pass == 1)) continue;
+        const cv::Point c(cvRound(job.keypoints[i].pt.x * s), cvRound(job.keypoints[i].pt.y * s));
+        cv::circle(img, c, is_dynamic ? 2 : 1, is_dynamic ? red : green, cv::FILLED, cv::LINE_AA);
+      }
+    }
+    std::vector<uchar> jpeg;
+    if (!cv::imencode(".jpg", img, jpeg, {cv::IMWRITE_JPEG_QUALITY, 80})) throw Error("JPEG encoding failed");
+    std::filesystem::create_directories(dir);
+    write_text(dir / job.file, std::string(jpeg.begin(), jpeg.end()));
+  } catch (const std::exception& e) {
+    // A missing thumbnail is noted by the report; it must never stop the run.
+    spdlog::warn("thumbnail {} not written: {}", job.file, e.what());
+  }
 }
 
 void RunArtifacts::thin_thumbnails() {
@@ -154,8 +195,10 @@ void RunArtifacts::thin_thumbnails() {
       if (t.index % stride_ == 0) {
         kept.push_back(std::move(t));
       } else {
-        std::error_code ec;
-        std::filesystem::remove(options_.out_dir / "culled" / t.file, ec);
+        Job job;
+        job.kind = Job::Kind::Remove;
+        job.file = t.file;
+        submit(std::move(job));
       }
     }
     thumbnails_ = std::move(kept);
@@ -164,27 +207,40 @@ void RunArtifacts::thin_thumbnails() {
 
 void RunArtifacts::on_keyframe(map::KeyframeId id, const io::FrameData& data) {
   if (!enabled() || !options_.dense_cloud || data.depth.empty() || data.bgr.empty()) return;
-  Stopwatch watch;
+  const double cpu_start = thread_cpu_ms();
+  Job job;
+  job.kind = Job::Kind::Dense;
+  job.keyframe = id;
+  job.bgr = data.bgr;
+  job.depth = data.depth;
+  job.culled_points = std::move(pending_culled_);
+  job.dynamic_boxes = std::move(pending_boxes_);
+  pending_culled_.clear();
+  pending_boxes_.clear();
+  submit(std::move(job));
+  const double ms = thread_cpu_ms() - cpu_start;
+  tracking_ms_total_ += ms;
+  tracking_ms_max_ = std::max(tracking_ms_max_, ms);
+}
+
+void RunArtifacts::keep_dense(Job& job) {
   const int step = options_.dense_step;
-  const cv::Size small((data.depth.cols + step - 1) / step, (data.depth.rows + step - 1) / step);
+  const cv::Size small((job.depth.cols + step - 1) / step, (job.depth.rows + step - 1) / step);
   DenseKeyframe kf;
   // Nearest-neighbour for depth: averaging across a depth edge would invent points in mid-air.
-  cv::resize(data.depth, kf.depth, small, 0, 0, cv::INTER_NEAREST);
-  cv::resize(data.bgr, kf.bgr, small, 0, 0, cv::INTER_AREA);
+  cv::resize(job.depth, kf.depth, small, 0, 0, cv::INTER_NEAREST);
+  cv::resize(job.bgr, kf.bgr, small, 0, 0, cv::INTER_AREA);
   kf.keep = cv::Mat(small, CV_8U, cv::Scalar(255));
   const double s = 1.0 / step;
-  for (const cv::Rect2f& b : pending_boxes_)
+  for (const cv::Rect2f& b : job.dynamic_boxes)
     cv::rectangle(
         kf.keep,
         cv::Rect(cvFloor(b.x * s), cvFloor(b.y * s), cvCeil(b.width * s) + 1, cvCeil(b.height * s) + 1),
         cv::Scalar(0), cv::FILLED);
   const int radius = std::max(1, cvCeil(options_.dynamic_margin_px * s));
-  for (const cv::Point2f& p : pending_culled_)
+  for (const cv::Point2f& p : job.culled_points)
     cv::circle(kf.keep, cv::Point(cvRound(p.x * s), cvRound(p.y * s)), radius, cv::Scalar(0), cv::FILLED);
-  dense_[id] = std::move(kf);
-  const double ms = watch.elapsed_ms();
-  tracking_ms_total_ += ms;
-  tracking_ms_max_ = std::max(tracking_ms_max_, ms);
+  dense_[job.keyframe] = std::move(kf);
 }
 
 std::vector<PlyPoint> RunArtifacts::map_cloud(map::MapView& view) const {
@@ -264,6 +320,7 @@ nlohmann::json RunArtifacts::write(map::MapView& view) {
   nlohmann::json j;
   if (!enabled()) return j;
   Stopwatch watch;
+  stop_writer();  // every picked thumbnail is on disk before the index names it
   std::filesystem::create_directories(options_.out_dir);
   const auto map_points = map_cloud(view);
   write_ply(options_.out_dir / "map_points.ply", map_points, "StillPoint map points (SLAM world frame)");
@@ -284,12 +341,14 @@ nlohmann::json RunArtifacts::write(map::MapView& view) {
                       {"file", t.file},
                       {"features", t.features},
                       {"culled", t.culled}});
-  if (!thumbnails_.empty())
+  if (!thumbnails_.empty()) {
+    std::filesystem::create_directories(options_.out_dir / "culled");
     write_text(options_.out_dir / "culled" / "index.json",
                nlohmann::json{{"stride", stride_}, {"frames", frames}}.dump(2) + "\n");
+  }
   j["culled_thumbnails"] = thumbnails_.size();
-  j["tracking_thread_ms_total"] = tracking_ms_total_;
-  j["tracking_thread_ms_max"] = tracking_ms_max_;
+  j["tracking_thread_cpu_ms_total"] = tracking_ms_total_;
+  j["tracking_thread_cpu_ms_max"] = tracking_ms_max_;
   j["write_ms"] = watch.elapsed_ms();
   return j;
 }

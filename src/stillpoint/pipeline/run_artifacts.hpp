@@ -4,16 +4,20 @@
 // regions cut out (dense_cloud.ply), and a handful of frames with their culled features drawn
 // (culled/frame_NNNNNN.jpg + culled/index.json). `stillpoint report` turns them into a page.
 //
-// Cost on the tracking thread: on_frame() is a modulo test for most frames; only the picked frames
-// (at most `max_thumbnails`) are resized, drawn and JPEG-encoded. With the dense cloud on, each new
-// keyframe keeps a subsampled copy of its depth and colour (a few hundred kB at the default step).
+// Cost on the tracking thread: on_frame() is a modulo test for most frames; for the picked frames
+// (at most about `max_thumbnails`) it copies the keypoint list and hands the frame to a writer
+// thread that resizes, draws, JPEG-encodes and writes it. With the dense cloud on, each new keyframe
+// keeps a subsampled copy of its depth and colour (a few hundred kB at the default step).
 #include <cstdint>
 #include <filesystem>
+#include <memory>
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
+#include <thread>
 #include <unordered_map>
 #include <vector>
 
+#include "stillpoint/common/bounded_queue.hpp"
 #include "stillpoint/dynamic/detection.hpp"
 #include "stillpoint/geometry/camera.hpp"
 #include "stillpoint/io/frame.hpp"
@@ -46,6 +50,9 @@ void write_ply(const std::filesystem::path& file, const std::vector<PlyPoint>& p
 class RunArtifacts {
  public:
   RunArtifacts(ArtifactOptions options, geo::CameraIntrinsics camera);
+  ~RunArtifacts();
+  RunArtifacts(const RunArtifacts&) = delete;
+  RunArtifacts& operator=(const RunArtifacts&) = delete;
 
   [[nodiscard]] bool enabled() const { return !options_.out_dir.empty(); }
 
@@ -58,8 +65,9 @@ class RunArtifacts {
   // The frame last passed to on_frame() became keyframe `id`.
   void on_keyframe(map::KeyframeId id, const io::FrameData& data);
 
-  // Writes map_points.ply, dense_cloud.ply (when enabled) and culled/index.json; returns figures for
-  // stats.json. Safe to call more than once (the last call wins).
+  // Waits for the thumbnail writer, then writes map_points.ply, dense_cloud.ply (when enabled) and
+  // culled/index.json; returns figures for stats.json. Safe to call more than once (the last call
+  // wins; thumbnails picked after the first call are written on the calling thread).
   nlohmann::json write(map::MapView& view);
 
  private:
@@ -69,15 +77,31 @@ class RunArtifacts {
     std::string file;
     std::size_t features = 0, culled = 0;
   };
+  // Work for the writer thread, in order: draw and write a thumbnail, remove one (thinning), or
+  // keep a keyframe's subsampled depth and colour for the dense cloud.
+  struct Job {
+    enum class Kind { Thumbnail, Remove, Dense } kind = Kind::Thumbnail;
+    std::string file;  // name inside out_dir/culled
+    cv::Mat bgr;       // shares the frame's pixels (frames are never modified after decoding)
+    cv::Mat depth;     // idem (Dense)
+    std::vector<cv::KeyPoint> keypoints;
+    std::vector<bool> dynamic;
+    std::vector<dyn::Detection> boxes;
+    std::vector<bool> box_dynamic;
+    map::KeyframeId keyframe = map::kNoKeyframe;  // Dense
+    std::vector<cv::Point2f> culled_points;       // Dense: the frame's dynamic regions
+    std::vector<cv::Rect2f> dynamic_boxes;
+  };
   struct DenseKeyframe {
     cv::Mat depth;  // CV_32F, subsampled
     cv::Mat bgr;    // CV_8UC3, same size
     cv::Mat keep;   // CV_8U, 0 where the pixel lies in a culled dynamic region
   };
 
-  void save_thumbnail(const io::FrameData& data, const std::vector<cv::KeyPoint>& keypoints,
-                      const std::vector<bool>& dynamic, const std::vector<dyn::Detection>& boxes,
-                      const std::vector<bool>& box_dynamic);
+  void submit(Job job);
+  void run_job(Job& job);
+  void keep_dense(Job& job);
+  void stop_writer();
   void thin_thumbnails();
   std::vector<PlyPoint> map_cloud(map::MapView& view) const;
   std::vector<PlyPoint> dense_cloud(map::MapView& view) const;
@@ -89,8 +113,10 @@ class RunArtifacts {
   // Dynamic regions of the last frame, kept until we know whether it became a keyframe.
   std::vector<cv::Point2f> pending_culled_;
   std::vector<cv::Rect2f> pending_boxes_;
-  std::unordered_map<map::KeyframeId, DenseKeyframe> dense_;
-  double tracking_ms_total_ = 0;  // time spent here on the tracking thread
+  std::unordered_map<map::KeyframeId, DenseKeyframe> dense_;  // filled by the writer thread
+  std::unique_ptr<BoundedQueue<Job>> jobs_;
+  std::thread writer_;
+  double tracking_ms_total_ = 0;  // CPU time spent here by the tracking thread
   double tracking_ms_max_ = 0;
 };
 
