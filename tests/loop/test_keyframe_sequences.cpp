@@ -59,6 +59,7 @@ TEST(SequenceSegmenter, LengthCapAndIds) {
   EXPECT_EQ(segment(std::vector<double>(39, 0.01), p), (std::vector<std::size_t>{15, 15, 10}));
   p.max_length = 4;
   EXPECT_EQ(segment(std::vector<double>(9, 0.0), p), (std::vector<std::size_t>{4, 4, 2}));
+  p.short_sequences_grow = false;  // the strict reading: a one-keyframe sequence closes on a turn
   SequenceSegmenter seg(p);
   EXPECT_FALSE(seg.add(7, yaw(0), one_word(1)).has_value());
   const auto closed = seg.add(8, yaw(1.0), one_word(2));
@@ -67,6 +68,19 @@ TEST(SequenceSegmenter, LengthCapAndIds) {
   EXPECT_EQ(closed->keyframes, (std::vector<KeyframeId>{7}));
   EXPECT_EQ(seg.open_id(), 1U);
   EXPECT_EQ(seg.open_keyframes(), (std::vector<KeyframeId>{8}));
+}
+
+TEST(SequenceSegmenter, ShortSequencesTakeTheNextKeyframeWhateverTheTurn) {
+  SequenceParams p;  // short_sequences_grow by default, min_length 2
+  // Fast turns everywhere: pairs instead of singletons.
+  EXPECT_EQ(segment(std::vector<double>(7, 0.5), p), (std::vector<std::size_t>{2, 2, 2, 2}));
+  // A fast turn between two slow stretches: the keyframe after the turn still starts a sequence.
+  EXPECT_EQ(segment({0.01, 0.01, 0.5, 0.01, 0.01}, p), (std::vector<std::size_t>{3, 3}));
+  p.short_sequences_grow = false;
+  EXPECT_EQ(segment(std::vector<double>(7, 0.5), p), (std::vector<std::size_t>(8, 1)));
+  p.short_sequences_grow = true;
+  p.min_length = 3;
+  EXPECT_EQ(segment(std::vector<double>(7, 0.5), p), (std::vector<std::size_t>{3, 3, 2}));
 }
 
 TEST(SequenceSegmenter, SequenceVectorIsNormalisedSum) {

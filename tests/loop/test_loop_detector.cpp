@@ -65,16 +65,22 @@ TEST(LoopDetectors, SequencesQueryTheDatabaseFarLess) {
 }
 
 TEST(LoopDetectors, ShortSequencesNeverCloseALoop) {
-  // Every keyframe turns by more than θ_T: all sequences have one keyframe, so nothing is queried.
+  // Every keyframe turns by more than θ_T and short sequences close at once (the strict reading): all
+  // sequences have one keyframe, so nothing is queried.
   auto stream = make_stream(path_with_revisit(), 8, 14);
   for (std::size_t i = 0; i < stream.keyframes.size(); ++i) {
     stream.keyframes[i].R_cw =
         Eigen::AngleAxisd(0.2 * static_cast<double>(i), Eigen::Vector3d::UnitY()).toRotationMatrix();
   }
-  auto det = make_loop_detector("bow-sequence", LoopDetectorParams{});
+  LoopDetectorParams strict;
+  strict.sequence.short_sequences_grow = false;
+  auto det = make_loop_detector("bow-sequence", strict);
   const auto r = run(*det, stream);
   EXPECT_TRUE(r.candidates.empty());
   EXPECT_EQ(r.stats.queries, 0U);
+  // Read literally ("shorter sequences never close"), the same turns give pairs that are queried.
+  auto grow = make_loop_detector("bow-sequence", LoopDetectorParams{});
+  EXPECT_GT(run(*grow, stream).stats.queries, 0U);
 }
 
 TEST(GroupConsistency, NeedsConsecutiveOverlappingGroups) {

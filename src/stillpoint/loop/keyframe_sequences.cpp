@@ -1,5 +1,6 @@
 #include "stillpoint/loop/keyframe_sequences.hpp"
 
+#include <fmt/ranges.h>
 #include <spdlog/spdlog.h>
 
 #include <Eigen/Core>
@@ -18,6 +19,8 @@ SequenceParams SequenceParams::from_yaml(const sp::ConfigReader& r) {
   r.read("max_length", p.max_length, 1, 1000);
   r.read("min_length", p.min_length, 1, 1000);
   r.read("angle_to_first", p.angle_to_first);
+  r.read("short_sequences_grow", p.short_sequences_grow);
+  r.read("min_common_ratio", p.min_common_ratio, 0.01, 1.0);
   r.read("min_consistency", p.min_consistency, 1, 20);
   r.read("exclude_recent", p.exclude_recent, 0, 100);
   if (p.min_length > p.max_length) r.fail("min_length", "must not exceed max_length");
@@ -33,6 +36,8 @@ void SequenceParams::validate() const {
   }
   if (min_consistency < 1 || min_consistency > 20)
     throw sp::Error("keyframe sequences: min_consistency in [1, 20]");
+  if (!(min_common_ratio > 0.0 && min_common_ratio <= 1.0))
+    throw sp::Error("keyframe sequences: min_common_ratio must be in (0, 1]");
   if (exclude_recent < 0 || exclude_recent > 100)
     throw sp::Error("keyframe sequences: exclude_recent in [0, 100]");
 }
@@ -62,7 +67,10 @@ std::optional<KeyframeSequence> SequenceSegmenter::add(KeyframeId id, const Eige
   std::optional<KeyframeSequence> closed;
   if (!ids_.empty()) {
     const double theta = rotation_angle(params_.angle_to_first ? first_R_ : last_R_, R_cw);
-    const bool joins = theta < params_.theta_t && ids_.size() < static_cast<std::size_t>(params_.max_length);
+    const bool too_short =
+        params_.short_sequences_grow && ids_.size() < static_cast<std::size_t>(params_.min_length);
+    const bool joins =
+        (theta < params_.theta_t || too_short) && ids_.size() < static_cast<std::size_t>(params_.max_length);
     if (!joins) closed = close();
   }
   if (ids_.empty()) first_R_ = R_cw;
@@ -82,11 +90,16 @@ SequenceLoopDetector::SequenceLoopDetector(const LoopDetectorParams& params)
   params_.validate();
 }
 
-std::optional<KeyframeSequence> SequenceLoopDetector::record(std::optional<KeyframeSequence> closed) {
+std::optional<KeyframeSequence> SequenceLoopDetector::record(std::optional<KeyframeSequence> closed,
+                                                             bool end_of_run) {
   if (!closed) return closed;
   if (sequences_.size() != closed->id) throw sp::Error("SequenceLoopDetector: sequence ids out of order");
   sequences_.push_back(*closed);
-  if (closed->keyframes.size() < static_cast<std::size_t>(params_.sequence.min_length)) closed.reset();
+  spdlog::debug("sequence {} closed: keyframes {}", closed->id, fmt::join(closed->keyframes, ","));
+  const bool too_short = closed->keyframes.size() < static_cast<std::size_t>(params_.sequence.min_length);
+  // At the end of the run no keyframe will come to lengthen the open sequence: it is queried as it is,
+  // so a path that ends with a turn back onto its start still closes (office_a_loop_walking).
+  if (too_short && !(end_of_run && params_.sequence.short_sequences_grow)) closed.reset();
   return closed;
 }
 
@@ -108,7 +121,7 @@ std::vector<LoopCandidate> SequenceLoopDetector::query_and_file(const KeyframeSe
 
 std::vector<LoopCandidate> SequenceLoopDetector::finish(const CovisibilityView& view) {
   std::lock_guard lock(mutex_);
-  std::optional<KeyframeSequence> closed = record(segmenter_.flush());
+  std::optional<KeyframeSequence> closed = record(segmenter_.flush(), /*end_of_run=*/true);
   if (!closed) return {};
   return query_and_file(*closed, view);
 }
@@ -178,7 +191,7 @@ std::vector<LoopCandidate> SequenceLoopDetector::query_sequence(const KeyframeSe
   }
   std::vector<DatabaseHit> hits;
   if (any) {
-    hits = seq_db_.query(seq.bow, params_.min_common_ratio,
+    hits = seq_db_.query(seq.bow, params_.sequence.min_common_ratio,
                          [&](SequenceId id) { return id == seq.id || neighbours.contains(id); });
   }
   std::unordered_map<SequenceId, double> hit_score;

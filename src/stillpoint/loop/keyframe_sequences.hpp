@@ -10,8 +10,8 @@
 //    keyframes; otherwise the current sequence closes and the keyframe starts a new one. So a
 //    sequence has 1..L_T keyframes.
 //  * A sequence's BoW vector is the L1-normalised sum of its keyframes' L1-normalised vectors.
-//  * Sequences with fewer than min_length (2) keyframes are neither queried nor filed: they never
-//    close a loop.
+//  * A sequence with fewer than min_length (2) keyframes does not close on θ (short_sequences_grow);
+//    shorter ones (only the last one, at the end of a run) are neither queried nor filed.
 //  * The newly CLOSED sequence is the query (its vector is complete); detection therefore lags the
 //    newest keyframe by at most L_T keyframes.
 #include <Eigen/Core>
@@ -32,6 +32,15 @@ struct SequenceParams {
   int max_length = 15;          // L_T: keyframes per sequence at most [count], 1..1000
   int min_length = 2;           // shorter sequences never close a loop [count], 1..1000
   bool angle_to_first = false;  // measure θ against the sequence's first keyframe, not the previous one
+  // "Sequences shorter than min_length never close", read literally: such a sequence takes the next
+  // keyframe whatever θ is. Without it a fast turn leaves one-keyframe sequences that can never close a
+  // loop, and a loop that starts or ends in a turn is lost (office_a_loop_walking, docs/loop_sequences.md).
+  bool short_sequences_grow = true;
+  // Candidates share >= ratio x the most shared words (the per-keyframe filter, own value here): a
+  // sequence's vector pools up to L_T keyframes' words, so a 15-keyframe sequence shares far more words
+  // with any query than a 2-keyframe one showing the same place; at 0.8 (and 0.5) the true loop of
+  // office_a_loop_walking (a 2-keyframe sequence at the start) was filtered out, at 0.3 it ranks first.
+  double min_common_ratio = 0.3;  // [-], (0, 1]
   // Consecutive query sequences a candidate group must persist [count], 1..20. 1: a sequence already
   // pools up to L_T keyframes of evidence, and each extra sequence delays a loop by up to L_T keyframes.
   int min_consistency = 1;

@@ -146,7 +146,8 @@ class SequenceLoopDetector final : public LoopDetector {
   // Files the keyframe; returns the sequence it closed, if any (mutex held).
   std::optional<KeyframeSequence> file_keyframe(const KeyframeInfo& kf);
   // Records a closed sequence; returns it when it is long enough to be queried and filed.
-  std::optional<KeyframeSequence> record(std::optional<KeyframeSequence> closed);
+  // (At the end of the run a short open sequence is still returned, see finish()).
+  std::optional<KeyframeSequence> record(std::optional<KeyframeSequence> closed, bool end_of_run = false);
   // Queries a closed sequence, then files it (mutex held).
   std::vector<LoopCandidate> query_and_file(const KeyframeSequence& seq, const CovisibilityView& view);
   std::vector<LoopCandidate> query_sequence(const KeyframeSequence& seq, const CovisibilityView& view);
