@@ -88,8 +88,11 @@ class AdaptivePolicy final : public KeyframePolicy {
     const int effective = grid.sum();
     const double threshold = std::max<double>(cfg_.effective_min, cfg_.effective_share * c.tracked_inliers);
     if (effective >= threshold && grid_balance(grid).spread_out()) return true;
-    // Slow drift with no large view change: fall back on the reference-ratio rule when mapping is idle.
-    return c.mapping_idle && s.timed_out && s.losing_reference;
+    // Slow drift with no large view change: the reference keyframe is being lost and mapping can take a
+    // keyframe (idle, or the maximum interval passed): ORB-SLAM3's coverage rule as the safety net.
+    // Requiring both idle AND timed out (our first version) starved the map in walking_xyz, where people
+    // hide parts of the reference keyframe without any 30-degree view change.
+    return (c.mapping_idle || s.timed_out) && s.losing_reference;
   }
 
  private:
