@@ -169,11 +169,21 @@ void LoopCloser::handle_candidates(const std::vector<LoopCandidate>& candidates,
     }
     spdlog::info("loop detected: keyframe {} revisits keyframe {} ({} inliers)", c.query, c.match,
                  verified->inliers);
+    LoopClosure closure{0, 0, {}, verified->inliers};
+    {
+      map::MapView view = map_.view();
+      const map::Keyframe* q = view.keyframe(c.query);
+      const map::Keyframe* m = view.keyframe(c.match);
+      if (q != nullptr && m != nullptr) {
+        closure = {q->stamp, m->stamp, verified->T_query_w * m->T_cw.inverse(), verified->inliers};
+      }
+    }
     Stopwatch correction;
     correct(c.query, c.match, verified->T_query_w);
     {
       std::lock_guard lock(stats_mutex_);
       ++stats_.loops_closed;
+      stats_.closures.push_back(closure);
       stats_.correction_ms_total += correction.elapsed_ms();
     }
     last_loop_keyframe_ = kid;

@@ -34,6 +34,13 @@ struct LoopClosingConfig {
   static LoopClosingConfig from_yaml(const ConfigReader& r);
 };
 
+// One closed loop, as the benchmark checks it against ground truth.
+struct LoopClosure {
+  double query_stamp = 0, match_stamp = 0;
+  geo::SE3 T_query_match;  // the verified relative pose (camera query <- camera match)
+  int inliers = 0;
+};
+
 struct LoopClosingStats {
   std::size_t keyframes = 0;
   std::size_t candidates = 0;      // candidates from the detector (before verification)
@@ -46,6 +53,7 @@ struct LoopClosingStats {
   double correction_ms_total = 0;
   std::size_t global_ba_runs = 0;
   std::size_t global_ba_aborted = 0;
+  std::vector<LoopClosure> closures;
 };
 
 class LoopCloser {

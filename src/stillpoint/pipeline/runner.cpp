@@ -9,6 +9,7 @@
 #include "stillpoint/common/progress_bar.hpp"
 #include "stillpoint/common/timing.hpp"
 #include "stillpoint/eval/evaluate.hpp"
+#include "stillpoint/eval/loop_check.hpp"
 #include "stillpoint/pipeline/slam_system.hpp"
 
 namespace sp::pipeline {
@@ -23,6 +24,33 @@ void write_json(const std::filesystem::path& file, const nlohmann::json& j) {
     out << j.dump(2) << "\n";
   }
   std::filesystem::rename(tmp, file);
+}
+
+// Every closed loop judged by ground truth (loops_true / loops_false and one record per loop).
+void check_loops_against(const std::vector<io::StampedPose>& gt,
+                         const std::vector<loop::LoopClosure>& closures, nlohmann::json& stats) {
+  if (closures.empty() && !stats.contains("loops_closed")) return;
+  std::size_t n_true = 0, n_false = 0;
+  nlohmann::json list = nlohmann::json::array();
+  for (const auto& c : closures) {
+    const auto check = eval::check_loop(gt, c.query_stamp, c.match_stamp, c.T_query_match);
+    nlohmann::json j = {
+        {"query_stamp", c.query_stamp}, {"match_stamp", c.match_stamp}, {"inliers", c.inliers}};
+    if (check) {
+      j["translation_error_m"] = check->translation_error_m;
+      j["rotation_error_deg"] = check->rotation_error_deg;
+      j["gt_distance_m"] = check->gt_distance_m;
+      j["true"] = check->is_true;
+      (check->is_true ? n_true : n_false)++;
+      if (!check->is_true)
+        spdlog::warn("false loop closure: {:.3f} -> {:.3f} is off by {:.2f} m / {:.1f} deg", c.query_stamp,
+                     c.match_stamp, check->translation_error_m, check->rotation_error_deg);
+    }
+    list.push_back(j);
+  }
+  stats["loop_closures"] = list;
+  stats["loops_true"] = n_true;
+  stats["loops_false"] = n_false;
 }
 
 void write_outputs(SlamSystem& system, const RunOptions& options, const nlohmann::json& run_stats,
@@ -48,6 +76,7 @@ void write_outputs(SlamSystem& system, const RunOptions& options, const nlohmann
       result.stats["eval"] = eval::to_json(ev);
       result.ate_rmse = ev.ate.rmse;
       eval::write_plot(options.out_dir / "trajectory.png", ev);
+      check_loops_against(gt, system.loop_closures(), result.stats);
     } catch (const Error& e) {
       spdlog::warn("evaluation skipped: {}", e.what());
     }
@@ -76,6 +105,7 @@ RunResult run_slam(io::FrameSource& source, const SystemConfig& config, const Ru
   std::size_t done = 0;
   std::size_t lost = 0;
   bool interrupted = false;
+  nlohmann::json rss_timeline = nlohmann::json::array();  // [frames done, current RSS MiB]
   try {
     while (true) {
       if (options.stop != nullptr && options.stop->load()) {
@@ -90,6 +120,9 @@ RunResult run_slam(io::FrameSource& source, const SystemConfig& config, const Ru
       const FrameReport report = system.process(*data);
       if (report.state == track::TrackingState::Lost) ++lost;
       ++done;
+      if (options.rss_every_frames != 0 && done % options.rss_every_frames == 0) {
+        rss_timeline.push_back({done, current_rss_mib()});
+      }
       if (system.failed()) throw Error("a pipeline stage failed (see the log)");
       const double fps = static_cast<double>(done) / std::max(1e-9, wall.elapsed_ms() / 1000.0);
       bar.update(done, fmt::format("{:.1f} fps, {} lost", fps, lost));
@@ -101,6 +134,7 @@ RunResult run_slam(io::FrameSource& source, const SystemConfig& config, const Ru
   }
   bar.finish();
   system.finish();
+  if (options.rss_every_frames != 0) rss_timeline.push_back({done, current_rss_mib()});
   if (options.save_map) {
     // After finish(): local mapping and loop closing have drained, so the map is final.
     try {
@@ -113,7 +147,8 @@ RunResult run_slam(io::FrameSource& source, const SystemConfig& config, const Ru
   const double seconds = wall.elapsed_ms() / 1000.0;
   const nlohmann::json run_stats = {{"wall_s", seconds},
                                     {"fps", static_cast<double>(done) / std::max(1e-9, seconds)},
-                                    {"skipped_frames", source.skipped_frames()}};
+                                    {"skipped_frames", source.skipped_frames()},
+                                    {"rss_timeline_mib", rss_timeline}};
   write_outputs(system, options, run_stats, result);
   return result;
 }

@@ -305,6 +305,10 @@ std::vector<io::StampedPose> SlamSystem::keyframe_trajectory() {
   return out;
 }
 
+std::vector<loop::LoopClosure> SlamSystem::loop_closures() const {
+  return closer_ ? closer_->stats().closures : std::vector<loop::LoopClosure>{};
+}
+
 nlohmann::json SlamSystem::statistics() {
   nlohmann::json j;
   j["frames"] = frames_;

@@ -61,6 +61,8 @@ class SlamSystem {
   [[nodiscard]] std::vector<io::StampedPose> trajectory();
   [[nodiscard]] std::vector<io::StampedPose> keyframe_trajectory();
   [[nodiscard]] nlohmann::json statistics();
+  // Loops closed so far (empty without loop closing).
+  [[nodiscard]] std::vector<loop::LoopClosure> loop_closures() const;
   // Writes map_points.ply, dense_cloud.ply and culled/index.json (when enabled); figures for stats.json.
   nlohmann::json write_artifacts();
   [[nodiscard]] StageTimes& times() { return times_; }
