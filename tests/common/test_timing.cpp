@@ -1,5 +1,7 @@
 #include <gtest/gtest.h>
 
+#include <vector>
+
 #include "stillpoint/common/timing.hpp"
 
 namespace sp {
@@ -22,6 +24,17 @@ TEST(Timing, EmptySummaryIsZero) {
 }
 
 TEST(Timing, PeakRssIsPositiveOnLinux) { EXPECT_GT(peak_rss_mib(), 0.0); }
+
+TEST(Timing, CurrentRssFollowsAnAllocationAndStaysBelowThePeak) {
+  const double before = current_rss_mib();
+  EXPECT_GT(before, 0.0);
+  // 64 MiB written (so resident, not just reserved) must show up in VmRSS.
+  std::vector<char> block(64u << 20, 1);
+  const double during = current_rss_mib();
+  EXPECT_GT(during, before + 32.0) << "VmRSS did not grow with a 64 MiB touched block";
+  EXPECT_LE(during, peak_rss_mib() + 1e-6);
+  EXPECT_EQ(block[block.size() / 2], 1);
+}
 
 }  // namespace
 }  // namespace sp

@@ -68,4 +68,8 @@ class StageTimes {
 // Peak resident set size of this process in MiB (VmHWM), 0 when unknown.
 double peak_rss_mib();
 
+// Current resident set size of this process in MiB (VmRSS), 0 when unknown. Sampled during a run
+// to show whether memory stays flat (the peak alone cannot tell growth from one early spike).
+double current_rss_mib();
+
 }  // namespace sp

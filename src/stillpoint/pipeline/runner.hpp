@@ -27,6 +27,10 @@ struct RunOptions {
   std::optional<std::filesystem::path> save_map;    // save the map here at the end (also on early stop)
   bool artifacts = true;     // map_points.ply and culled/ thumbnails (run_artifacts.hpp)
   bool dense_cloud = false;  // also dense_cloud.ply from keyframe depth, dynamic regions removed
+  // Every this many frames the current RSS goes into stats.json as rss_timeline_mib, a list of
+  // [frames done, MiB] (plus one sample after the stages have drained); 0 = off. scripts/soak.sh
+  // reads it to check that memory stays flat over a long run.
+  std::size_t rss_every_frames = 100;
 };
 
 struct RunResult {
