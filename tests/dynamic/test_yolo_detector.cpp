@@ -2,6 +2,7 @@
 #include <gtest/gtest.h>
 
 #include <filesystem>
+#include <fstream>
 #include <map>
 #include <opencv2/imgcodecs.hpp>
 
@@ -82,6 +83,39 @@ TEST(YoloDetector, MissingModelNamesTheFile) {
     EXPECT_NE(std::string(e.what()).find("/nonexistent/model.onnx"), std::string::npos);
   }
   EXPECT_THROW(DetectorConfig::for_model("/nonexistent/x.cfg"), Error);
+}
+
+// Found by fuzz_model_config: a Darknet cfg with width=9 (or 0, -5, "320x") loaded and only failed
+// later inside OpenCV. Now an InputError naming the cfg and the line.
+TEST(YoloDetector, DarknetCfgWithOutOfRangeInputSizeNamesFileAndLine) {
+  const auto dir = std::filesystem::path(SP_TEST_TMP_DIR) / "darknet_cfg";
+  std::filesystem::create_directories(dir);
+  const auto good = dir / "net.cfg";
+  std::ofstream(good) << "[net]\nwidth=320\nheight = 256\n[convolutional]\nwidth=9\n";
+  const DetectorConfig c = DetectorConfig::for_model(good);
+  EXPECT_EQ(c.input_width, 320);
+  EXPECT_EQ(c.input_height, 256);
+  for (const std::string bad : {"width=9", "width=0", "height=-5", "width=320x", "height=99999"}) {
+    const auto file = dir / "bad.cfg";
+    std::ofstream(file) << "# comment\n[net]\nbatch=1\n" << bad << "\n";
+    try {
+      DetectorConfig::for_model(file);
+      FAIL() << bad << " was accepted";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("bad.cfg:4"), std::string::npos) << e.what();
+    }
+  }
+}
+
+// Found by fuzz_model_config: a model path with a component longer than NAME_MAX made
+// std::filesystem::exists throw filesystem_error out of from_yaml (not an sp::Error).
+TEST(YoloDetector, OverlongModelPathInYamlIsJustNotFound) {
+  const std::string name(300, 'm');
+  const auto r = ConfigReader::from_string("model: " + name + ".onnx\nweights: " + name + "\n", "t.yaml");
+  DetectorConfig c;
+  EXPECT_NO_THROW(c = DetectorConfig::from_yaml(r));
+  EXPECT_EQ(c.model, name + ".onnx");
+  EXPECT_THROW(DetectorConfig::for_model(name + ".cfg"), Error);
 }
 
 TEST(YoloDetector, ConfigFromModelPathAndYaml) {

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <fstream>
+#include <system_error>
 
 #include "stillpoint/common/error.hpp"
 
@@ -62,18 +63,36 @@ void read_darknet_input_size(const std::filesystem::path& cfg, int& w, int& h) {
     if (eq == std::string::npos) continue;
     const std::string key = line.substr(0, eq);
     if (key != "width" && key != "height") continue;
+    const std::string text = line.substr(eq + 1);
+    int value = 0;
+    std::size_t used = 0;
     try {
-      (key == "width" ? w : h) = std::stoi(line.substr(eq + 1));
+      value = std::stoi(text, &used);
     } catch (const std::exception&) {
       throw InputError(cfg.string(), line_no, "cannot read '" + key + "' as an integer");
     }
+    // Same range as the YAML keys input_width/input_height: a size of 0, a negative one or "320x"
+    // was accepted and only failed later, deep in OpenCV's blob code, without naming the cfg line.
+    if (used != text.size() || value < 32 || value > 4096) {
+      throw InputError(cfg.string(), line_no,
+                       "'" + key + "' must be an integer in [32, 4096], got '" + text + "'");
+    }
+    (key == "width" ? w : h) = value;
   }
+}
+
+// exists() without the throwing overload: a configured path that cannot even be looked up (a name
+// longer than NAME_MAX, found by fuzz_model_config) must read as "not found", not escape as a
+// std::filesystem_error that names neither the YAML file nor the key.
+bool file_exists(const std::filesystem::path& p) {
+  std::error_code ec;
+  return std::filesystem::exists(p, ec);
 }
 
 }  // namespace
 
 DetectorConfig DetectorConfig::for_model(const std::filesystem::path& model) {
-  if (!std::filesystem::exists(model)) throw Error(model.string() + ": detector model file not found");
+  if (!file_exists(model)) throw Error(model.string() + ": detector model file not found");
   DetectorConfig c;
   c.model = model.string();
   const std::string ext = lower_ext(model);
@@ -115,16 +134,16 @@ DetectorConfig DetectorConfig::from_yaml(const ConfigReader& r) {
     std::filesystem::path m = r.require<std::string>("model");
     if (m.is_relative() && !r.file().empty()) {
       const auto base = std::filesystem::path(r.file()).parent_path();
-      if (std::filesystem::exists(base / m)) m = base / m;
+      if (file_exists(base / m)) m = base / m;
     }
     // Start from the per-model defaults so a YAML file only lists what differs.
-    if (std::filesystem::exists(m)) c = for_model(m);
+    if (file_exists(m)) c = for_model(m);
     c.model = m.string();
   }
   r.read("weights", c.weights);
   if (!c.weights.empty() && std::filesystem::path(c.weights).is_relative() && !r.file().empty()) {
     const auto w = std::filesystem::path(r.file()).parent_path() / c.weights;
-    if (std::filesystem::exists(w)) c.weights = w.string();
+    if (file_exists(w)) c.weights = w.string();
   }
   r.read_choice("decoder", c.decoder, {"auto", "yolov5", "yolov7", "yolox", "darknet"});
   r.read("input_width", c.input_width, 32, 4096);
