@@ -35,7 +35,12 @@ inline Stream make_stream(const std::vector<int>& places, int per_place, std::ui
       std::uniform_real_distribution<double> weight(0.5, 1.5);
       for (int w = 0; w < 60; ++w) e.emplace_back(pool[w], weight(rng));
       std::uniform_int_distribution<WordId> noise(100000, 100999);
-      for (int w = 0; w < 30; ++w) e.emplace_back(noise(rng), weight(rng));
+      for (int w = 0; w < 30; ++w) {
+        // Draws in named steps, last argument first: argument evaluation order is unspecified (GCC goes
+        // right to left, clang left to right), so a clang build generated other data and failed.
+        const double wt = weight(rng);
+        e.emplace_back(noise(rng), wt);
+      }
       KeyframeInfo kf;
       kf.id = id++;
       kf.R_cw = Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitY()).toRotationMatrix();

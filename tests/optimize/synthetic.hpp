@@ -21,7 +21,13 @@ inline geo::SE3 camera_pose(int index) {
 inline std::vector<Eigen::Vector3d> random_points(std::mt19937& rng, int count) {
   std::uniform_real_distribution<double> ux(-2.0, 2.0), uy(-1.5, 1.5), uz(3.0, 8.0);
   std::vector<Eigen::Vector3d> pts;
-  for (int i = 0; i < count; ++i) pts.emplace_back(ux(rng), uy(rng), uz(rng));
+  for (int i = 0; i < count; ++i) {
+    // Draws in named steps, last argument first: argument evaluation order is unspecified (GCC goes
+    // right to left, clang left to right), so a clang build generated other data and failed.
+    const double z = uz(rng);
+    const double y = uy(rng);
+    pts.emplace_back(ux(rng), y, z);
+  }
   return pts;
 }
 

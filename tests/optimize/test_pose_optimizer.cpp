@@ -28,13 +28,17 @@ Scene make_scene(int count, double outlier_ratio, unsigned seed) {
     const int octave = static_cast<int>(u01(rng) * 4);
     const double sigma = std::pow(1.2, octave);
     o.inv_sigma2 = 1.0 / (sigma * sigma);
-    o.uv = proj.head<2>() + sigma * Eigen::Vector2d(noise(rng), noise(rng));
+    // Draws in named steps, last argument first: argument evaluation order is unspecified (GCC goes
+    // right to left, clang left to right), so a clang build generated other data and failed.
+    const double ny = noise(rng);
+    o.uv = proj.head<2>() + sigma * Eigen::Vector2d(noise(rng), ny);
     const bool stereo = u01(rng) < 0.5;
     if (stereo) o.u_right = o.uv.x() - (proj.x() - proj.z()) + sigma * noise(rng);
     const bool gross = u01(rng) < outlier_ratio;
     if (gross) {
       const double sx = u01(rng) < 0.5 ? -1 : 1, sy = u01(rng) < 0.5 ? -1 : 1;
-      o.uv += Eigen::Vector2d(sx * offset(rng), sy * offset(rng));
+      const double oy = sy * offset(rng);  // drawn first, as above
+      o.uv += Eigen::Vector2d(sx * offset(rng), oy);
       if (stereo) o.u_right = o.uv.x() - (proj.x() - proj.z());
     }
     s.obs.push_back(o);
