@@ -92,3 +92,31 @@ TEST(ConfigReader, NonScalarKeyIsAConfigError) {
 
 }  // namespace
 }  // namespace sp
+
+namespace sp {
+namespace {
+
+// Fuzzing found inputs on which yaml-cpp's scanner runs for minutes; they are refused up front.
+TEST(ConfigReaderText, ControlCharactersAndBrokenUtf8AreRefusedWithTheLine) {
+  const std::string nul("a: 1\n!\0\0\0\tIII\n", 17);
+  try {
+    (void)ConfigReader::from_string(nul, "bad.yaml");
+    FAIL() << "NUL bytes accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("bad.yaml"), std::string::npos);
+    EXPECT_NE(std::string(e.what()).find(":2"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW((void)ConfigReader::from_string("a: \xff\xfe\n", "bad.yaml"), InputError);
+  EXPECT_THROW((void)ConfigReader::from_string("a: \xc3\n", "bad.yaml"), InputError);  // truncated sequence
+  // Valid UTF-8, tabs and CRLF are fine.
+  const auto r = ConfigReader::from_string("name: \"caf\xc3\xa9\"\r\nvalue:\t3\n", "ok.yaml");
+  std::string name;
+  int value = 0;
+  r.read("name", name);
+  r.read("value", value, 0, 10);
+  EXPECT_EQ(name, "caf\xc3\xa9");
+  EXPECT_EQ(value, 3);
+}
+
+}  // namespace
+}  // namespace sp

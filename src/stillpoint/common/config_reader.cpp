@@ -1,8 +1,37 @@
 #include "stillpoint/common/config_reader.hpp"
 
+#include <fstream>
 #include <functional>
+#include <sstream>
 
 namespace sp {
+
+namespace {
+
+// YAML text must be Unicode without C0 control characters other than tab, LF and CR. yaml-cpp 0.7
+// does not check: fuzzing found inputs with NUL bytes or broken UTF-8 on which its scanner runs for
+// minutes, so such files are refused here, with the line, before yaml-cpp sees them.
+void check_yaml_text(const std::string& text, const std::string& origin) {
+  int line = 1;
+  for (std::size_t i = 0; i < text.size();) {
+    const auto c = static_cast<unsigned char>(text[i]);
+    if (c == '\n') ++line;
+    if (c < 0x80) {
+      if ((c < 0x20 && c != '\t' && c != '\n' && c != '\r') || c == 0x7f)
+        throw InputError(origin, line, "control character " + std::to_string(c) + " in a YAML file");
+      ++i;
+      continue;
+    }
+    // UTF-8: lead byte gives the length; continuation bytes are 10xxxxxx; no overlong 2-byte forms.
+    const std::size_t len = c >= 0xf0 && c <= 0xf4 ? 4 : c >= 0xe0 ? 3 : c >= 0xc2 && c <= 0xdf ? 2 : 0;
+    bool ok = len != 0 && i + len <= text.size();
+    for (std::size_t k = 1; ok && k < len; ++k) ok = (static_cast<unsigned char>(text[i + k]) & 0xc0) == 0x80;
+    if (!ok) throw InputError(origin, line, "invalid UTF-8 in a YAML file");
+    i += len;
+  }
+}
+
+}  // namespace
 
 ConfigReader::ConfigReader(std::shared_ptr<State> state, YAML::Node node, std::string prefix)
     : state_(std::move(state)), node_(std::move(node)), prefix_(std::move(prefix)) {}
@@ -11,8 +40,14 @@ ConfigReader ConfigReader::from_file(const std::filesystem::path& file) {
   if (!std::filesystem::exists(file)) throw ConfigError(file.string(), 0, "(file)", "file not found");
   auto state = std::make_shared<State>();
   state->file = file.string();
+  std::ifstream in(file, std::ios::binary);
+  if (!in) throw ConfigError(file.string(), 0, "(file)", "cannot open the file");
+  std::stringstream buffer;
+  buffer << in.rdbuf();
+  const std::string text = buffer.str();
+  check_yaml_text(text, file.string());
   try {
-    state->root = YAML::LoadFile(file.string());
+    state->root = YAML::Load(text);
   } catch (const YAML::ParserException& e) {
     throw InputError(file.string(), e.mark.line + 1, "YAML syntax error: " + e.msg);
   } catch (const YAML::Exception& e) {
@@ -27,10 +62,13 @@ ConfigReader ConfigReader::from_file(const std::filesystem::path& file) {
 ConfigReader ConfigReader::from_string(const std::string& text, const std::string& origin) {
   auto state = std::make_shared<State>();
   state->file = origin;
+  check_yaml_text(text, origin);
   try {
     state->root = YAML::Load(text);
   } catch (const YAML::ParserException& e) {
     throw InputError(origin, e.mark.line + 1, "YAML syntax error: " + e.msg);
+  } catch (const YAML::Exception& e) {
+    throw InputError(origin, 0, std::string("cannot read YAML: ") + e.what());
   }
   if (state->root.IsNull()) state->root = YAML::Node(YAML::NodeType::Map);
   if (!state->root.IsMap()) throw InputError(origin, 1, "top level must be a mapping of keys");
