@@ -15,8 +15,10 @@ W=$D/office_a_walking_xyz; S=$D/office_a_static_xyz; T=$D/office_a_sitting_stati
 # No dynamic handling at all (issue baseline rows).
 "$B" bench --detector-model "$M" --sequences "$W" "$S" "$K" --out "$OUT/nodyn" --run-args=--dynamic --run-args=off
 # Table V: detector x flow (plus oracle boxes).
-"$B" bench --ablation dynamic --detector-model "$M" --sequences "$W" "$T" "$S" "$L" --out "$OUT/table5"
+"$B" bench --ablation dynamic --detector-model "$M" --sequences "$W" "$L" "$T" "$S" --out "$OUT/table5"
 # Culling on/off x adaptive keyframes on/off.
 "$B" bench --ablation keyframes --detector-model "$M" --sequences "$W" "$S" "$T" "$L" --out "$OUT/keyframes"
-# Loop detection: off, per keyframe, per keyframe sequence.
-"$B" bench --ablation loop --detector-model "$M" --sequences "$L" --out "$OUT/loop"
+# Loop detection: off, per keyframe, per keyframe sequence, ParC_NetVLAD. Deterministic on the loop
+# sequence (every detector sees the same keyframes: Table VIII), threaded on the others (false loops).
+"$B" bench --ablation loop --detector-model "$M" --sequences "$L" --out "$OUT/loop" --run-args=--deterministic
+"$B" bench --ablation loop --detector-model "$M" --sequences "$W" "$S" "$T" --out "$OUT/loop_false"
