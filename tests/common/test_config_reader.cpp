@@ -98,7 +98,8 @@ namespace {
 
 // Fuzzing found inputs on which yaml-cpp's scanner runs for minutes; they are refused up front.
 TEST(ConfigReaderText, ControlCharactersAndBrokenUtf8AreRefusedWithTheLine) {
-  const std::string nul("a: 1\n!\0\0\0\tIII\n", 17);
+  constexpr char kNul[] = "a: 1\n!\0\0\0\tIII\n";
+  const std::string nul(kNul, sizeof(kNul) - 1);  // the literal's own NULs included, not its terminator
   try {
     (void)ConfigReader::from_string(nul, "bad.yaml");
     FAIL() << "NUL bytes accepted";
