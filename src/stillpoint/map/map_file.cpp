@@ -16,6 +16,7 @@
 #include <unordered_set>
 
 #include "stillpoint/common/error.hpp"
+#include "stillpoint/map/byte_codec.hpp"
 
 namespace sp::map {
 
@@ -51,52 +52,11 @@ std::string tag_name(std::uint32_t tag) {
   return s;
 }
 
-constexpr std::array<std::uint32_t, 256> make_crc_table() {
-  std::array<std::uint32_t, 256> t{};
-  for (std::uint32_t n = 0; n < 256; ++n) {
-    std::uint32_t c = n;
-    for (int k = 0; k < 8; ++k) c = (c & 1U) != 0 ? 0xEDB88320U ^ (c >> 1U) : c >> 1U;
-    t[n] = c;
-  }
-  return t;
-}
-constexpr std::array<std::uint32_t, 256> kCrcTable = make_crc_table();
-
 // ---------------------------------------------------------------- writing
-
-class Writer {
- public:
-  void u8(std::uint8_t v) { buf_.push_back(v); }
-  void u32(std::uint32_t v) {
-    for (int i = 0; i < 4; ++i)
-      buf_.push_back(static_cast<std::uint8_t>(v >> (8U * static_cast<unsigned>(i))));
-  }
-  void u64(std::uint64_t v) {
-    for (int i = 0; i < 8; ++i)
-      buf_.push_back(static_cast<std::uint8_t>(v >> (8U * static_cast<unsigned>(i))));
-  }
-  void i32(std::int32_t v) { u32(static_cast<std::uint32_t>(v)); }
-  void f32(float v) { u32(std::bit_cast<std::uint32_t>(v)); }
-  void f64(double v) { u64(std::bit_cast<std::uint64_t>(v)); }
-  void bytes(const std::uint8_t* p, std::size_t n) { buf_.insert(buf_.end(), p, p + n); }
-  void str(const std::string& s) {
-    u32(static_cast<std::uint32_t>(s.size()));
-    bytes(reinterpret_cast<const std::uint8_t*>(s.data()), s.size());
-  }
-  void vec3(const Eigen::Vector3d& v) {
-    f64(v.x());
-    f64(v.y());
-    f64(v.z());
-  }
-  std::vector<std::uint8_t>& buffer() { return buf_; }
-
- private:
-  std::vector<std::uint8_t> buf_;
-};
 
 void append_section(std::vector<std::uint8_t>& out, std::uint32_t tag,
                     const std::vector<std::uint8_t>& payload) {
-  Writer w;
+  ByteWriter w;
   w.u32(tag);
   w.u64(payload.size());
   auto& b = w.buffer();
@@ -106,7 +66,7 @@ void append_section(std::vector<std::uint8_t>& out, std::uint32_t tag,
   out.insert(out.end(), b.begin(), b.end());
 }
 
-void write_pose(Writer& w, const geo::SE3& T) {
+void write_pose(ByteWriter& w, const geo::SE3& T) {
   const Eigen::Quaterniond& q = T.quaternion();
   w.f64(q.x());
   w.f64(q.y());
@@ -115,7 +75,7 @@ void write_pose(Writer& w, const geo::SE3& T) {
   w.vec3(T.translation());
 }
 
-void write_descriptor(Writer& w, const cv::Mat& desc, int row) {
+void write_descriptor(ByteWriter& w, const cv::Mat& desc, int row) {
   std::array<std::uint8_t, kDescBytes> d{};
   if (!desc.empty() && desc.type() == CV_8U && desc.cols == kDescBytes && row < desc.rows)
     std::memcpy(d.data(), desc.ptr<std::uint8_t>(row), kDescBytes);
@@ -132,94 +92,7 @@ std::vector<std::uint8_t> encode_thumbnail(const cv::Mat& thumbnail) {
 
 // ---------------------------------------------------------------- reading
 
-// Bounds-checked little-endian reader over one section's payload; errors name the file, the
-// section and the absolute byte offset.
-class Reader {
- public:
-  Reader(std::span<const std::uint8_t> data, std::size_t base, std::string file, std::string section)
-      : data_(data), base_(base), file_(std::move(file)), section_(std::move(section)) {}
-
-  [[noreturn]] void fail(const std::string& what) const {
-    throw InputError(file_, 0, fmt::format("section {} at byte offset {}: {}", section_, base_ + pos_, what));
-  }
-  void need(std::size_t n) const {
-    if (data_.size() - pos_ < n)
-      fail(fmt::format("record runs past the end of the section ({} bytes needed, {} left)", n,
-                       data_.size() - pos_));
-  }
-  // Guards a count read from the file against the bytes left before anything is allocated for it.
-  void need_records(std::uint64_t count, std::size_t min_record_bytes) const {
-    if (count > (data_.size() - pos_) / std::max<std::size_t>(1, min_record_bytes))
-      fail(fmt::format("count {} does not fit in the {} bytes left", count, data_.size() - pos_));
-  }
-  std::uint8_t u8() {
-    need(1);
-    return data_[pos_++];
-  }
-  std::uint32_t u32() {
-    need(4);
-    std::uint32_t v = 0;
-    for (int i = 0; i < 4; ++i)
-      v |= std::uint32_t{data_[pos_ + static_cast<std::size_t>(i)]} << (8U * static_cast<unsigned>(i));
-    pos_ += 4;
-    return v;
-  }
-  std::uint64_t u64() {
-    need(8);
-    std::uint64_t v = 0;
-    for (int i = 0; i < 8; ++i)
-      v |= std::uint64_t{data_[pos_ + static_cast<std::size_t>(i)]} << (8U * static_cast<unsigned>(i));
-    pos_ += 8;
-    return v;
-  }
-  std::int32_t i32() { return static_cast<std::int32_t>(u32()); }
-  float f32() { return std::bit_cast<float>(u32()); }
-  double f64() { return std::bit_cast<double>(u64()); }
-  double finite64(const char* what) {
-    const double v = f64();
-    if (!std::isfinite(v)) fail(fmt::format("{} is not finite", what));
-    return v;
-  }
-  float finite32(const char* what) {
-    const float v = f32();
-    if (!std::isfinite(v)) fail(fmt::format("{} is not finite", what));
-    return v;
-  }
-  Eigen::Vector3d vec3(const char* what) {
-    Eigen::Vector3d v;
-    v.x() = finite64(what);
-    v.y() = finite64(what);
-    v.z() = finite64(what);
-    return v;
-  }
-  const std::uint8_t* bytes(std::size_t n) {
-    need(n);
-    const std::uint8_t* p = data_.data() + pos_;
-    pos_ += n;
-    return p;
-  }
-  std::string str(std::size_t max_len) {
-    const std::uint32_t n = u32();
-    if (n > max_len) fail(fmt::format("string of {} bytes (at most {})", n, max_len));
-    const auto* p = bytes(n);
-    return {reinterpret_cast<const char*>(p), n};
-  }
-  void expect_end() const {
-    if (pos_ != data_.size())
-      fail(fmt::format("{} unexpected bytes after the last record", data_.size() - pos_));
-  }
-  [[nodiscard]] const std::string& file() const { return file_; }
-  [[nodiscard]] const std::string& section() const { return section_; }
-
- private:
-  std::span<const std::uint8_t> data_;
-  std::size_t base_;
-  std::size_t pos_ = 0;
-  std::string file_;
-  std::string section_;
-};
-
-geo::SE3 read_pose(Reader& r) {
+geo::SE3 read_pose(ByteReader& r) {
   Eigen::Quaterniond q;
   q.x() = r.finite64("pose quaternion");
   q.y() = r.finite64("pose quaternion");
@@ -258,7 +131,7 @@ std::optional<cv::Size> jpeg_size(std::span<const std::uint8_t> j) {
   return std::nullopt;
 }
 
-MapFileInfo read_head(Reader& r, std::uint64_t& n_keyframes, std::uint64_t& n_points, KeyframeId& next_kf,
+MapFileInfo read_head(ByteReader& r, std::uint64_t& n_keyframes, std::uint64_t& n_points, KeyframeId& next_kf,
                       PointId& next_pt) {
   MapFileInfo info;
   n_keyframes = r.u64();
@@ -295,7 +168,7 @@ MapFileInfo read_head(Reader& r, std::uint64_t& n_keyframes, std::uint64_t& n_po
   return info;
 }
 
-Keyframe read_keyframe(Reader& r, const MapFileInfo& info) {
+Keyframe read_keyframe(ByteReader& r, const MapFileInfo& info) {
   Keyframe kf;
   kf.id = r.u64();
   kf.frame_index = r.u64();
@@ -354,7 +227,7 @@ Keyframe read_keyframe(Reader& r, const MapFileInfo& info) {
   return kf;
 }
 
-MapPoint read_point(Reader& r) {
+MapPoint read_point(ByteReader& r) {
   MapPoint p;
   p.id = r.u64();
   p.position = r.vec3("point position");
@@ -452,12 +325,6 @@ void validate_references(MapContents& m, const std::string& file) {
 }
 
 }  // namespace
-
-std::uint32_t crc32(std::span<const std::uint8_t> bytes, std::uint32_t crc) {
-  crc = ~crc;
-  for (std::uint8_t b : bytes) crc = kCrcTable[(crc ^ b) & 0xFFU] ^ (crc >> 8U);
-  return ~crc;
-}
 
 bool MapFileInfo::operator==(const MapFileInfo& o) const {
   const auto& a = camera;
@@ -580,12 +447,12 @@ MapContents snapshot_map(Map& map, const MapFileInfo& info) {
 std::vector<std::uint8_t> serialize_map(const MapContents& m) {
   std::vector<std::uint8_t> out(kMagic.begin(), kMagic.end());
   {
-    Writer w;
+    ByteWriter w;
     w.u32(kMapFormatVersion);
     out.insert(out.end(), w.buffer().begin(), w.buffer().end());
   }
   {
-    Writer w;
+    ByteWriter w;
     w.u64(m.keyframes.size());
     w.u64(m.points.size());
     w.u64(m.next_keyframe_id);
@@ -602,7 +469,7 @@ std::vector<std::uint8_t> serialize_map(const MapContents& m) {
     append_section(out, kTagHead, w.buffer());
   }
   {
-    Writer w;
+    ByteWriter w;
     w.u32(static_cast<std::uint32_t>(m.keyframes.size()));
     for (const Keyframe& kf : m.keyframes) {
       w.u64(kf.id);
@@ -639,7 +506,7 @@ std::vector<std::uint8_t> serialize_map(const MapContents& m) {
     append_section(out, kTagKeyframes, w.buffer());
   }
   {
-    Writer w;
+    ByteWriter w;
     w.u32(static_cast<std::uint32_t>(m.points.size()));
     for (const MapPoint& p : m.points) {
       w.u64(p.id);
@@ -662,7 +529,7 @@ std::vector<std::uint8_t> serialize_map(const MapContents& m) {
   }
   {
     // The END section: total file size and the CRC of everything before it.
-    Writer w;
+    ByteWriter w;
     w.u64(out.size() + kFrameBytes + 12);
     w.u32(crc32(out));
     append_section(out, kTagEnd, w.buffer());
@@ -693,7 +560,7 @@ MapContents parse_map(std::span<const std::uint8_t> bytes, const std::string& na
     fail("not a StillPoint map file (bad magic)");
   if (bytes.size() < kPreambleBytes)
     fail(fmt::format("truncated at byte offset {} in the file header (format version)", bytes.size()));
-  Reader pre(bytes.subspan(8, 4), 8, name, "header");
+  ByteReader pre(bytes.subspan(8, 4), 8, name, "header");
   const std::uint32_t version = pre.u32();
   if (version != kMapFormatVersion)
     fail(fmt::format(
@@ -708,7 +575,7 @@ MapContents parse_map(std::span<const std::uint8_t> bytes, const std::string& na
     const std::string section = tag_name(expected);
     if (bytes.size() - pos < 12)
       fail(fmt::format("truncated at byte offset {} in section {} (section header)", bytes.size(), section));
-    Reader frame(bytes.subspan(pos, 12), pos, name, section);
+    ByteReader frame(bytes.subspan(pos, 12), pos, name, section);
     const std::uint32_t tag = frame.u32();
     const std::uint64_t length = frame.u64();
     if (tag != expected)
@@ -719,14 +586,14 @@ MapContents parse_map(std::span<const std::uint8_t> bytes, const std::string& na
           fmt::format("truncated at byte offset {} in section {} (it declares {} payload bytes, {} are left)",
                       bytes.size(), section, length, left >= 4 ? left - 4 : 0));
     const auto body = bytes.subspan(pos, 12 + length);
-    Reader crc_reader(bytes.subspan(pos + 12 + length, 4), pos + 12 + length, name, section);
+    ByteReader crc_reader(bytes.subspan(pos + 12 + length, 4), pos + 12 + length, name, section);
     const std::uint32_t stored = crc_reader.u32();
     const std::uint32_t computed = crc32(body);
     if (stored != computed)
       fail(
           fmt::format("checksum mismatch in section {} (stored {:08x}, computed {:08x}): the file is corrupt",
                       section, stored, computed));
-    Reader r(bytes.subspan(pos + 12, length), pos + 12, name, section);
+    ByteReader r(bytes.subspan(pos + 12, length), pos + 12, name, section);
     if (expected == kTagHead) {
       m.info = read_head(r, n_keyframes, n_points, m.next_keyframe_id, m.next_point_id);
     } else if (expected == kTagKeyframes) {

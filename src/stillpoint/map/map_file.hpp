@@ -19,15 +19,12 @@
 #include <vector>
 
 #include "stillpoint/geometry/camera.hpp"
+#include "stillpoint/map/byte_codec.hpp"  // crc32
 #include "stillpoint/map/map.hpp"
 
 namespace sp::map {
 
 inline constexpr std::uint32_t kMapFormatVersion = 1;
-
-// CRC-32 (IEEE 802.3, reflected polynomial 0xEDB88320, as zlib's crc32). `crc` continues a running
-// checksum: crc32(b, crc32(a)) == crc32(a + b).
-std::uint32_t crc32(std::span<const std::uint8_t> bytes, std::uint32_t crc = 0);
 
 // What a map file records besides the records: enough to refuse a map built for another camera or
 // pyramid, and to tell the user when the vocabulary differs from the one the map was built with.
