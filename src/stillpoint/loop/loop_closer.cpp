@@ -169,21 +169,12 @@ void LoopCloser::handle_candidates(const std::vector<LoopCandidate>& candidates,
     }
     spdlog::info("loop detected: keyframe {} revisits keyframe {} ({} inliers)", c.query, c.match,
                  verified->inliers);
-    LoopClosure closure{0, 0, {}, verified->inliers};
-    {
-      map::MapView view = map_.view();
-      const map::Keyframe* q = view.keyframe(c.query);
-      const map::Keyframe* m = view.keyframe(c.match);
-      if (q != nullptr && m != nullptr) {
-        closure = {q->stamp, m->stamp, verified->T_query_w * m->T_cw.inverse(), verified->inliers};
-      }
-    }
     Stopwatch correction;
     correct(c.query, c.match, verified->T_query_w);
     {
       std::lock_guard lock(stats_mutex_);
       ++stats_.loops_closed;
-      stats_.closures.push_back(closure);
+      stats_.closures.push_back(verified->closure);
       stats_.correction_ms_total += correction.elapsed_ms();
     }
     last_loop_keyframe_ = kid;
@@ -278,7 +269,7 @@ std::optional<LoopCloser::Verified> LoopCloser::verify(map::KeyframeId query, ma
                   result.inliers);
     return std::nullopt;
   }
-  return Verified{T, result.inliers};
+  return Verified{T, result.inliers, LoopClosure{q->stamp, m->stamp, T * m->T_cw.inverse(), result.inliers}};
 }
 
 void LoopCloser::correct(map::KeyframeId query, map::KeyframeId match, const geo::SE3& T_query_w) {

@@ -88,6 +88,7 @@ class LoopCloser {
   struct Verified {
     geo::SE3 T_query_w;  // corrected pose of the query keyframe
     int inliers = 0;
+    LoopClosure closure;  // what the benchmark checks against ground truth
   };
   void handle_candidates(const std::vector<LoopCandidate>& candidates, map::KeyframeId kid);
   std::optional<Verified> verify(map::KeyframeId query, map::KeyframeId match);
