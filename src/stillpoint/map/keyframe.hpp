@@ -30,8 +30,10 @@ struct Keyframe {
   std::set<KeyframeId> loop_edges;
   bool bad = false;
   bool protected_from_culling = false;
-  geo::SE3 T_c_parent;  // set when the keyframe is culled, so frames that referenced it still resolve  //
-                        // e.g. while the loop closer uses it
+  geo::SE3 T_c_parent;  // set when the keyframe is culled, so frames that referenced it still resolve
+  // Culled keyframes stay as slim records (pose, parent) for the trajectory; their features,
+  // thumbnail and point slots are released by MapView::purge_bad once retired long enough.
+  KeyframeId retired_at = kNoKeyframe;  // next keyframe id when it was culled
 
   [[nodiscard]] Eigen::Vector3d camera_center() const { return T_cw.inverse().translation(); }
 };
@@ -49,6 +51,7 @@ struct MapPoint {
   int found = 1;    // times it was matched there
   bool bad = false;
   PointId replaced_by = kNoPoint;
+  KeyframeId retired_at = kNoKeyframe;  // next keyframe id when it went bad (purge_bad drops it later)
 
   [[nodiscard]] double found_ratio() const { return static_cast<double>(found) / std::max(1, visible); }
   // Pyramid level at which a point at `distance` is expected to be detected.

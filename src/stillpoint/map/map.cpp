@@ -100,6 +100,7 @@ void MapView::erase_point(PointId pid) {
   MapPoint* p = point(pid);
   if (p == nullptr || p->bad) return;
   p->bad = true;
+  p->retired_at = map_.next_keyframe_id_;
   for (const auto& [kid, feature] : p->observations) {
     Keyframe* kf = keyframe(kid);
     if (kf != nullptr && static_cast<std::size_t>(feature) < kf->points.size() &&
@@ -119,6 +120,7 @@ void MapView::replace_point(PointId old_id, PointId by) {
   old_p->observations.clear();
   old_p->bad = true;
   old_p->replaced_by = by;
+  old_p->retired_at = map_.next_keyframe_id_;
   for (const auto& [kid, feature] : observations) {
     Keyframe* kf = keyframe(kid);
     if (kf == nullptr) continue;
@@ -282,6 +284,7 @@ void MapView::erase_keyframe(KeyframeId kid) {
   kf->covisibility.clear();
   kf->children.clear();
   kf->bad = true;
+  kf->retired_at = map_.next_keyframe_id_;
 }
 
 const std::unordered_map<KeyframeId, Keyframe>& MapView::keyframes() const { return map_.keyframes_; }
@@ -332,9 +335,22 @@ void MapView::restore(std::vector<Keyframe> keyframes, std::vector<MapPoint> poi
   map_.next_point_id_ = next_point_id;
 }
 
-void MapView::purge_bad() {
-  std::erase_if(map_.points_,
-                [](const auto& kv) { return kv.second.bad && kv.second.replaced_by == kNoPoint; });
+std::size_t MapView::purge_bad(KeyframeId retired_before) {
+  const auto retired = [&](bool bad, KeyframeId at) {
+    return bad && at != kNoKeyframe && at < retired_before;
+  };
+  std::size_t purged = std::erase_if(
+      map_.points_, [&](const auto& kv) { return retired(kv.second.bad, kv.second.retired_at); });
+  for (auto& [id, kf] : map_.keyframes_) {
+    if (!retired(kf.bad, kf.retired_at) || (kf.features.size() == 0 && kf.thumbnail.empty())) continue;
+    kf.features = FeatureSet{};
+    kf.index = feat::FeatureGrid{};
+    kf.points = std::vector<PointId>{};
+    kf.thumbnail.release();
+    kf.loop_edges.clear();
+    ++purged;
+  }
+  return purged;
 }
 
 }  // namespace sp::map

@@ -51,8 +51,13 @@ class MapView {
   [[nodiscard]] std::size_t live_points() const;
   // The ids the next add_keyframe / add_point will hand out (map files save them).
   [[nodiscard]] std::pair<KeyframeId, PointId> next_ids() const;
-  // Drops bad records for good (they are kept a while so ids held by other stages resolve).
-  void purge_bad();
+  // Frees what bad records hold once they went bad before keyframe id `retired_before`: map points
+  // are dropped (ids still held elsewhere then resolve to nullptr, as for any erased point) and culled
+  // keyframes shrink to their pose and spanning-tree link, which the trajectory still follows.
+  // Records are kept a while first so that ids other stages hold across views still resolve (and
+  // replaced points still redirect). Without this a long run grows by every culled record.
+  // Returns the number of records purged or slimmed.
+  std::size_t purge_bad(KeyframeId retired_before);
   // Fills an EMPTY map with records that keep their ids (a loaded map file); new ids continue from
   // the given counters. Records are stored as they are: the map-file loader has validated their
   // cross-references. Throws sp::Error when the map is not empty or an id is 0, repeated or >= its counter.

@@ -20,6 +20,7 @@ LocalMappingConfig LocalMappingConfig::from_yaml(const ConfigReader& r) {
   r.read("redundancy", c.redundancy, 0.5, 1.0);
   r.read("cull_keyframes", c.cull_keyframes);
   r.read("min_found_ratio", c.min_found_ratio, 0.0, 1.0);
+  r.read("purge_after_keyframes", c.purge_after_keyframes, std::size_t{1}, std::size_t{100000});
   c.ba = opt::BAConfig::from_yaml(r.section("bundle_adjustment"));
   return c;
 }
@@ -43,10 +44,10 @@ LocalMappingStats LocalMapper::process(map::KeyframeId kid, const std::atomic<bo
     stats.fused_points = fuse_neighbours(view, kid);
   }
   if (config_.local_ba) local_bundle_adjustment(kid, abort, stats);
-  if (config_.cull_keyframes) {
-    map::MapView view = map_.view();
-    stats.culled_keyframes = cull_keyframes(view, kid);
-  }
+  map::MapView view = map_.view();
+  if (config_.cull_keyframes) stats.culled_keyframes = cull_keyframes(view, kid);
+  if (kid > config_.purge_after_keyframes)
+    stats.purged_records = view.purge_bad(kid - config_.purge_after_keyframes);
   return stats;
 }
 

@@ -21,6 +21,9 @@ struct LocalMappingConfig {
   double redundancy = 0.9;            // share of a keyframe's points seen by 3 others -> culled
   bool cull_keyframes = true;
   double min_found_ratio = 0.25;  // new points matched less often than this are dropped
+  // Culled points and keyframes are freed this many keyframes after they went bad (ids other stages
+  // hold across views resolve until then); keeps memory flat on long runs.
+  std::size_t purge_after_keyframes = 20;
   opt::BAConfig ba;
   static LocalMappingConfig from_yaml(const ConfigReader& r);
 };
@@ -30,6 +33,7 @@ struct LocalMappingStats {
   int culled_points = 0;
   int fused_points = 0;
   int culled_keyframes = 0;
+  std::size_t purged_records = 0;
   bool ba_aborted = false;
 };
 
