@@ -31,7 +31,8 @@ class BowVector {
   [[nodiscard]] auto end() const noexcept { return entries_.end(); }
   // Weight of `word`, 0 when absent (binary search).
   [[nodiscard]] double weight(WordId word) const;
-  [[nodiscard]] double l1_norm() const;
+  // Kept with the vector: every score needs both norms, and summed sequence vectors are long.
+  [[nodiscard]] double l1_norm() const noexcept { return l1_norm_; }
   // Scales the weights to sum 1 (no-op for an empty or all-zero vector).
   void normalize_l1();
 
@@ -39,6 +40,7 @@ class BowVector {
 
  private:
   std::vector<Entry> entries_;  // sorted by word, unique words, weights >= 0
+  double l1_norm_ = 0.0;        // sum of the weights
 };
 
 // DBoW2's L1 score s = 1 - 1/2 |a/|a| - b/|b||_1, in [0, 1]; 0 when either vector is empty.

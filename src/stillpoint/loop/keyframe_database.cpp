@@ -5,78 +5,93 @@
 
 namespace sp::loop {
 
+void KeyframeDatabase::erase_locked(std::unordered_map<KeyframeId, Slot>::iterator it) {
+  const Slot slot = it->second;
+  Entry& e = entries_[slot];
+  for (const auto& [word, w] : e.bow) std::erase(inverted_[word], slot);
+  e = Entry{};
+  free_slots_.push_back(slot);
+  slot_of_.erase(it);
+}
+
 void KeyframeDatabase::add(KeyframeId id, const BowVector& bow) {
   std::lock_guard lock(mutex_);
-  if (auto it = vectors_.find(id); it != vectors_.end()) {
-    for (const auto& [word, w] : it->second) std::erase(inverted_[word], id);
+  if (auto it = slot_of_.find(id); it != slot_of_.end()) erase_locked(it);
+  Slot slot = 0;
+  if (!free_slots_.empty()) {
+    slot = free_slots_.back();
+    free_slots_.pop_back();
+  } else {
+    slot = static_cast<Slot>(entries_.size());
+    entries_.emplace_back();
   }
   for (const auto& [word, w] : bow) {
     if (word >= inverted_.size()) inverted_.resize(std::size_t{word} + 1);
-    inverted_[word].push_back(id);
+    inverted_[word].push_back(slot);
   }
-  vectors_[id] = bow;
+  entries_[slot] = Entry{id, bow, true};
+  slot_of_.emplace(id, slot);
 }
 
 void KeyframeDatabase::erase(KeyframeId id) {
   std::lock_guard lock(mutex_);
-  const auto it = vectors_.find(id);
-  if (it == vectors_.end()) return;
-  for (const auto& [word, w] : it->second) std::erase(inverted_[word], id);
-  vectors_.erase(it);
+  if (auto it = slot_of_.find(id); it != slot_of_.end()) erase_locked(it);
 }
 
 void KeyframeDatabase::clear() {
   std::lock_guard lock(mutex_);
   inverted_.clear();
-  vectors_.clear();
+  entries_.clear();
+  free_slots_.clear();
+  slot_of_.clear();
 }
 
 bool KeyframeDatabase::contains(KeyframeId id) const {
   std::lock_guard lock(mutex_);
-  return vectors_.contains(id);
+  return slot_of_.contains(id);
 }
 
 std::size_t KeyframeDatabase::size() const {
   std::lock_guard lock(mutex_);
-  return vectors_.size();
+  return slot_of_.size();
 }
 
 std::optional<double> KeyframeDatabase::score(KeyframeId id, const BowVector& bow) const {
   std::lock_guard lock(mutex_);
-  const auto it = vectors_.find(id);
-  if (it == vectors_.end()) return std::nullopt;
+  const auto it = slot_of_.find(id);
+  if (it == slot_of_.end()) return std::nullopt;
   ++scored_;
-  return l1_score(it->second, bow);
+  return l1_score(entries_[it->second].bow, bow);
 }
 
 std::optional<BowVector> KeyframeDatabase::bow(KeyframeId id) const {
   std::lock_guard lock(mutex_);
-  const auto it = vectors_.find(id);
-  if (it == vectors_.end()) return std::nullopt;
-  return it->second;
+  const auto it = slot_of_.find(id);
+  if (it == slot_of_.end()) return std::nullopt;
+  return entries_[it->second].bow;
 }
 
 std::vector<DatabaseHit> KeyframeDatabase::query(const BowVector& query, double min_common_ratio,
                                                  const std::function<bool(KeyframeId)>& exclude) const {
   std::lock_guard lock(mutex_);
   ++queries_;
-  std::unordered_map<KeyframeId, std::uint32_t> common;
-  std::unordered_map<KeyframeId, bool> excluded;  // memoises `exclude`, which may be costly
+  enum : std::uint8_t { kUnknown, kKept, kExcluded };
+  std::vector<std::uint32_t> common(entries_.size(), 0);
+  std::vector<std::uint8_t> state(entries_.size(), kUnknown);  // memoises `exclude`, which may be costly
   for (const auto& [word, w] : query) {
     if (word >= inverted_.size()) continue;
-    for (KeyframeId id : inverted_[word]) {
-      auto [ex, fresh] = excluded.try_emplace(id, false);
-      if (fresh && exclude) ex->second = exclude(id);
-      if (!ex->second) ++common[id];
+    for (Slot slot : inverted_[word]) {
+      if (state[slot] == kUnknown) state[slot] = exclude && exclude(entries_[slot].id) ? kExcluded : kKept;
+      if (state[slot] == kKept) ++common[slot];
     }
   }
-  std::uint32_t max_common = 0;
-  for (const auto& [id, n] : common) max_common = std::max(max_common, n);
-  const auto min_common = static_cast<std::uint32_t>(std::ceil(min_common_ratio * max_common));
+  const std::uint32_t max_common = common.empty() ? 0 : *std::max_element(common.begin(), common.end());
+  const auto min_common =
+      std::max<std::uint32_t>(1, static_cast<std::uint32_t>(std::ceil(min_common_ratio * max_common)));
   std::vector<DatabaseHit> hits;
-  for (const auto& [id, n] : common) {
-    if (n < min_common) continue;
-    hits.push_back({id, n, l1_score(vectors_.at(id), query)});
+  for (Slot slot = 0; slot < common.size(); ++slot) {
+    if (common[slot] < min_common) continue;
+    hits.push_back({entries_[slot].id, common[slot], l1_score(entries_[slot].bow, query)});
   }
   scored_ += hits.size();
   std::sort(hits.begin(), hits.end(), [](const DatabaseHit& a, const DatabaseHit& b) {

@@ -45,9 +45,21 @@ class KeyframeDatabase {
   [[nodiscard]] std::size_t scored_pairs() const;
 
  private:
+  // Entries live in dense slots so that a query counts shared words in flat arrays, not hash maps:
+  // summed sequence vectors have thousands of words, each touching several inverted lists.
+  using Slot = std::uint32_t;
+  struct Entry {
+    KeyframeId id = 0;
+    BowVector bow;
+    bool used = false;
+  };
+  void erase_locked(std::unordered_map<KeyframeId, Slot>::iterator it);
+
   mutable std::mutex mutex_;
-  std::vector<std::vector<KeyframeId>> inverted_;  // indexed by word
-  std::unordered_map<KeyframeId, BowVector> vectors_;
+  std::vector<std::vector<Slot>> inverted_;  // indexed by word
+  std::vector<Entry> entries_;               // indexed by slot
+  std::vector<Slot> free_slots_;
+  std::unordered_map<KeyframeId, Slot> slot_of_;
   mutable std::size_t queries_ = 0;
   mutable std::size_t scored_ = 0;
 };

@@ -55,7 +55,7 @@ KeyframeSequence SequenceSegmenter::close() {
   s.id = next_id_++;
   s.keyframes = std::move(ids_);
   std::vector<const BowVector*> ptrs;
-  for (const auto& b : bows_) ptrs.push_back(&b);
+  for (const auto& b : bows_) ptrs.push_back(b.get());
   s.bow = normalized_sum(ptrs);
   ids_.clear();
   bows_.clear();
@@ -63,7 +63,7 @@ KeyframeSequence SequenceSegmenter::close() {
 }
 
 std::optional<KeyframeSequence> SequenceSegmenter::add(KeyframeId id, const Eigen::Matrix3d& R_cw,
-                                                       const BowVector& bow) {
+                                                       std::shared_ptr<const BowVector> bow) {
   std::optional<KeyframeSequence> closed;
   if (!ids_.empty()) {
     const double theta = rotation_angle(params_.angle_to_first ? first_R_ : last_R_, R_cw);
@@ -75,7 +75,7 @@ std::optional<KeyframeSequence> SequenceSegmenter::add(KeyframeId id, const Eige
   }
   if (ids_.empty()) first_R_ = R_cw;
   ids_.push_back(id);
-  bows_.push_back(bow);
+  bows_.push_back(std::move(bow));
   last_R_ = R_cw;
   return closed;
 }
@@ -104,8 +104,9 @@ std::optional<KeyframeSequence> SequenceLoopDetector::record(std::optional<Keyfr
 }
 
 std::optional<KeyframeSequence> SequenceLoopDetector::file_keyframe(const KeyframeInfo& kf) {
-  keyframe_bow_[kf.id] = kf.bow;
-  std::optional<KeyframeSequence> closed = segmenter_.add(kf.id, kf.R_cw, kf.bow);
+  auto bow = std::make_shared<const BowVector>(kf.bow);
+  keyframe_bow_[kf.id] = bow;
+  std::optional<KeyframeSequence> closed = segmenter_.add(kf.id, kf.R_cw, std::move(bow));
   sequence_of_[kf.id] = segmenter_.open_id();
   return record(std::move(closed));
 }
@@ -227,20 +228,38 @@ std::vector<LoopCandidate> SequenceLoopDetector::query_sequence(const KeyframeSe
     if (g.acc >= params_.group_score_ratio * best_acc && seen.insert(g.best).second) kept.push_back(g);
   }
 
-  // Re-rank inside each kept sequence: the best-scoring (query keyframe, matched keyframe) pair.
+  // Re-rank inside each kept sequence in two linear passes instead of scoring all L x L keyframe
+  // pairs: the matched sequence's keyframe closest to the query sequence as a whole, then the query
+  // keyframe closest to that one (the pair geometric verification gets).
   std::vector<std::set<KeyframeId>> candidate_groups;
   std::vector<LoopCandidate> pairs;
+  const auto bow_of = [&](KeyframeId id) -> const BowVector* {
+    const auto it = keyframe_bow_.find(id);
+    return it == keyframe_bow_.end() ? nullptr : it->second.get();
+  };
   for (const auto& g : kept) {
     LoopCandidate best{0, 0, -1.0};
-    for (KeyframeId a : seq.keyframes) {
-      const auto qa = keyframe_bow_.find(a);
-      if (qa == keyframe_bow_.end()) continue;
-      for (KeyframeId b : sequences_[g.best].keyframes) {
-        const auto mb = keyframe_bow_.find(b);
-        if (mb == keyframe_bow_.end()) continue;
-        const double s = l1_score(qa->second, mb->second);
+    double best_match = -1.0;
+    for (KeyframeId b : sequences_[g.best].keyframes) {
+      const BowVector* mb = bow_of(b);
+      if (mb == nullptr) continue;
+      const double s = l1_score(seq.bow, *mb);
+      ++stats_.scored_pairs;
+      if (s > best_match) {
+        best_match = s;
+        best.match = b;
+      }
+    }
+    if (const BowVector* mb = best_match >= 0.0 ? bow_of(best.match) : nullptr) {
+      for (KeyframeId a : seq.keyframes) {
+        const BowVector* qa = bow_of(a);
+        if (qa == nullptr) continue;
+        const double s = l1_score(*qa, *mb);
         ++stats_.scored_pairs;
-        if (s > best.score) best = {a, b, s};
+        if (s > best.score) {
+          best.query = a;
+          best.score = s;
+        }
       }
     }
     if (best.score < 0.0) continue;  // every keyframe of one side was culled

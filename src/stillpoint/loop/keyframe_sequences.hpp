@@ -16,6 +16,7 @@
 //    newest keyframe by at most L_T keyframes.
 #include <Eigen/Core>
 #include <cstdint>
+#include <memory>
 #include <optional>
 #include <vector>
 
@@ -66,7 +67,12 @@ class SequenceSegmenter {
 
   // Adds the next keyframe. Returns the sequence this keyframe closed, if it closed one; the
   // keyframe itself then starts the next sequence.
-  std::optional<KeyframeSequence> add(KeyframeId id, const Eigen::Matrix3d& R_cw, const BowVector& bow);
+  // The vector is shared, not copied: the detector keeps the same one for re-ranking.
+  std::optional<KeyframeSequence> add(KeyframeId id, const Eigen::Matrix3d& R_cw,
+                                      std::shared_ptr<const BowVector> bow);
+  std::optional<KeyframeSequence> add(KeyframeId id, const Eigen::Matrix3d& R_cw, const BowVector& bow) {
+    return add(id, R_cw, std::make_shared<const BowVector>(bow));
+  }
   // Closes the open sequence (end of the run); nullopt when it is empty.
   std::optional<KeyframeSequence> flush();
 
@@ -79,7 +85,7 @@ class SequenceSegmenter {
   SequenceParams params_;
   SequenceId next_id_ = 0;
   std::vector<KeyframeId> ids_;
-  std::vector<BowVector> bows_;
+  std::vector<std::shared_ptr<const BowVector>> bows_;
   Eigen::Matrix3d first_R_ = Eigen::Matrix3d::Identity();
   Eigen::Matrix3d last_R_ = Eigen::Matrix3d::Identity();
 };

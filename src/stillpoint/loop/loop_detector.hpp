@@ -158,8 +158,9 @@ class SequenceLoopDetector final : public LoopDetector {
   KeyframeDatabase seq_db_;                                 // sequence id -> sequence vector
   std::vector<KeyframeSequence> sequences_;                 // closed sequences, index = id
   std::unordered_map<KeyframeId, SequenceId> sequence_of_;  // keyframe -> its sequence (open or closed)
-  std::unordered_map<KeyframeId, BowVector> keyframe_bow_;  // for re-ranking inside a matched sequence
-  std::vector<SequenceId> filed_;                           // sequences in seq_db_, in filing order
+  // For re-ranking inside a matched sequence; shared with the segmenter's open sequence.
+  std::unordered_map<KeyframeId, std::shared_ptr<const BowVector>> keyframe_bow_;
+  std::vector<SequenceId> filed_;  // sequences in seq_db_, in filing order
   GroupConsistency consistency_;
   DetectorStats stats_;
 };
