@@ -8,7 +8,9 @@
 namespace sp::loop {
 
 BowVector BowVector::from_entries(std::vector<Entry> entries) {
-  std::sort(entries.begin(), entries.end(), [](const Entry& a, const Entry& b) { return a.first < b.first; });
+  const auto by_word = [](const Entry& a, const Entry& b) { return a.first < b.first; };
+  if (!std::is_sorted(entries.begin(), entries.end(), by_word))  // merged sums arrive sorted
+    std::sort(entries.begin(), entries.end(), by_word);
   BowVector v;
   v.entries_.reserve(entries.size());
   for (const auto& [word, w] : entries) {

@@ -29,7 +29,7 @@ void KeyframeDatabase::add(KeyframeId id, const BowVector& bow) {
     if (word >= inverted_.size()) inverted_.resize(std::size_t{word} + 1);
     inverted_[word].push_back(slot);
   }
-  entries_[slot] = Entry{id, bow, true};
+  entries_[slot] = Entry{id, bow};
   slot_of_.emplace(id, slot);
 }
 

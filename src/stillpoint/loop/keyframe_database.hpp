@@ -51,7 +51,6 @@ class KeyframeDatabase {
   struct Entry {
     KeyframeId id = 0;
     BowVector bow;
-    bool used = false;
   };
   void erase_locked(std::unordered_map<KeyframeId, Slot>::iterator it);
 

@@ -21,17 +21,23 @@ namespace sp::map {
 // checksum: crc32(b, crc32(a)) == crc32(a + b).
 std::uint32_t crc32(std::span<const std::uint8_t> bytes, std::uint32_t crc = 0);
 
+// Little-endian unsigned integer at p (sizeof(T) bytes), and the inverse.
+template <typename T>
+T load_le(const std::uint8_t* p) {
+  T v = 0;
+  for (std::size_t i = 0; i < sizeof(T); ++i) v |= static_cast<T>(T{p[i]} << (8U * i));
+  return v;
+}
+template <typename T>
+void store_le(std::uint8_t* p, T v) {
+  for (std::size_t i = 0; i < sizeof(T); ++i) p[i] = static_cast<std::uint8_t>(v >> (8U * i));
+}
+
 class ByteWriter {
  public:
   void u8(std::uint8_t v) { buf_.push_back(v); }
-  void u32(std::uint32_t v) {
-    for (int i = 0; i < 4; ++i)
-      buf_.push_back(static_cast<std::uint8_t>(v >> (8U * static_cast<unsigned>(i))));
-  }
-  void u64(std::uint64_t v) {
-    for (int i = 0; i < 8; ++i)
-      buf_.push_back(static_cast<std::uint8_t>(v >> (8U * static_cast<unsigned>(i))));
-  }
+  void u32(std::uint32_t v) { put(v); }
+  void u64(std::uint64_t v) { put(v); }
   void i32(std::int32_t v) { u32(static_cast<std::uint32_t>(v)); }
   void f32(float v) { u32(std::bit_cast<std::uint32_t>(v)); }
   void f64(double v) { u64(std::bit_cast<std::uint64_t>(v)); }
@@ -48,6 +54,11 @@ class ByteWriter {
   std::vector<std::uint8_t>& buffer() { return buf_; }
 
  private:
+  template <typename T>
+  void put(T v) {
+    buf_.resize(buf_.size() + sizeof(T));
+    store_le(buf_.data() + buf_.size() - sizeof(T), v);
+  }
   std::vector<std::uint8_t> buf_;
 };
 
@@ -75,22 +86,8 @@ class ByteReader {
     need(1);
     return data_[pos_++];
   }
-  std::uint32_t u32() {
-    need(4);
-    std::uint32_t v = 0;
-    for (int i = 0; i < 4; ++i)
-      v |= std::uint32_t{data_[pos_ + static_cast<std::size_t>(i)]} << (8U * static_cast<unsigned>(i));
-    pos_ += 4;
-    return v;
-  }
-  std::uint64_t u64() {
-    need(8);
-    std::uint64_t v = 0;
-    for (int i = 0; i < 8; ++i)
-      v |= std::uint64_t{data_[pos_ + static_cast<std::size_t>(i)]} << (8U * static_cast<unsigned>(i));
-    pos_ += 8;
-    return v;
-  }
+  std::uint32_t u32() { return get<std::uint32_t>(); }
+  std::uint64_t u64() { return get<std::uint64_t>(); }
   std::int32_t i32() { return static_cast<std::int32_t>(u32()); }
   float f32() { return std::bit_cast<float>(u32()); }
   double f64() { return std::bit_cast<double>(u64()); }
@@ -131,6 +128,13 @@ class ByteReader {
   [[nodiscard]] const std::string& section() const { return section_; }
 
  private:
+  template <typename T>
+  T get() {
+    need(sizeof(T));
+    const T v = load_le<T>(data_.data() + pos_);
+    pos_ += sizeof(T);
+    return v;
+  }
   std::span<const std::uint8_t> data_;
   std::size_t base_;
   std::size_t pos_ = 0;

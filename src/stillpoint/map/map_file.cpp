@@ -345,10 +345,7 @@ std::uint64_t vocabulary_fingerprint(const std::filesystem::path& vocabulary_fil
   std::array<std::uint8_t, 8> b{};
   in.read(reinterpret_cast<char*>(b.data()), 8);
   if (!in) throw InputError(vocabulary_file.string(), 0, "cannot read the vocabulary checksum");
-  std::uint64_t v = 0;
-  for (int i = 0; i < 8; ++i)
-    v |= std::uint64_t{b[static_cast<std::size_t>(i)]} << (8U * static_cast<unsigned>(i));
-  return v;
+  return load_le<std::uint64_t>(b.data());
 }
 
 MapContents snapshot_map(Map& map, const MapFileInfo& info) {
@@ -649,26 +646,17 @@ MapFileInfo load_map(const std::filesystem::path& file, Map& map) {
 
 void reseal_map_bytes(std::vector<std::uint8_t>& bytes) {
   std::size_t pos = kPreambleBytes;
-  auto get_u64 = [&](std::size_t at) {
-    std::uint64_t v = 0;
-    for (std::size_t i = 0; i < 8; ++i) v |= std::uint64_t{bytes[at + i]} << (8U * i);
-    return v;
-  };
-  auto put_u32 = [&](std::size_t at, std::uint32_t v) {
-    for (std::size_t i = 0; i < 4; ++i) bytes[at + i] = static_cast<std::uint8_t>(v >> (8U * i));
-  };
-  auto put_u64 = [&](std::size_t at, std::uint64_t v) {
-    for (std::size_t i = 0; i < 8; ++i) bytes[at + i] = static_cast<std::uint8_t>(v >> (8U * i));
-  };
   while (bytes.size() >= pos + 12) {
-    const std::uint64_t length = get_u64(pos + 4);
+    const auto length = load_le<std::uint64_t>(bytes.data() + pos + 4);
     if (length > bytes.size() - pos - 12 || bytes.size() - pos - 12 - length < 4) return;
     const bool end = bytes[pos] == 'E' && bytes[pos + 1] == 'N' && bytes[pos + 2] == 'D' && length == 12;
     if (end) {
-      put_u64(pos + 12, pos + 12 + length + 4);
-      put_u32(pos + 20, crc32(std::span<const std::uint8_t>(bytes.data(), pos)));
+      store_le<std::uint64_t>(bytes.data() + pos + 12, pos + 12 + length + 4);
+      store_le<std::uint32_t>(bytes.data() + pos + 20,
+                              crc32(std::span<const std::uint8_t>(bytes.data(), pos)));
     }
-    put_u32(pos + 12 + length, crc32(std::span<const std::uint8_t>(bytes.data() + pos, 12 + length)));
+    store_le<std::uint32_t>(bytes.data() + pos + 12 + length,
+                            crc32(std::span<const std::uint8_t>(bytes.data() + pos, 12 + length)));
     pos += 12 + length + 4;
   }
 }
