@@ -10,7 +10,8 @@ K="$root/../shared/data/real/sevenscenes_redkitchen_dev"
 M="$root/../shared/models/yolox_nano.onnx"
 OUT="${1:-$root/bench_out}"
 W=$D/office_a_walking_xyz; S=$D/office_a_static_xyz; T=$D/office_a_sitting_static; L=$D/office_a_loop_walking
-# Main table: default configuration (YOLOX-nano + flow culling, heuristic keyframes, sequence loops).
+# Main table: default configuration of config/stillpoint.yaml (YOLOX-nano + flow culling: dynamic.mode
+# auto with a model; heuristic keyframes; per-keyframe BoW loop detection: loop_closing.detector bow-keyframe).
 "$B" bench --detector-model "$M" --sequences "$W" "$S" "$T" "$L" "$K" --out "$OUT/main"
 # No dynamic handling at all (issue baseline rows).
 "$B" bench --detector-model "$M" --sequences "$W" "$S" "$K" --out "$OUT/nodyn" --run-args=--dynamic --run-args=off
