@@ -1,18 +1,30 @@
-// stillpoint bench: runs sequences x variants (each run in its own process, so memory and crashes
-// are measured per run), then prints one table and writes JSON.
+// stillpoint bench: runs sequences x variants x repeats (each run in its own process, so memory and
+// crashes are measured per run), then prints the tables and writes JSON. Suite mode (--suite DIR) runs
+// every sequence folder under DIR and reports medians over repeats, a per-variant summary per group of
+// sequences (first path component, e.g. tune / heldout) and optional peers (ORB-SLAM2, NGD-SLAM).
 #include <fcntl.h>
 #include <fmt/format.h>
 #include <spawn.h>
 #include <spdlog/spdlog.h>
 #include <sys/wait.h>
+#include <unistd.h>
 
+#include <algorithm>
+#include <chrono>
 #include <cstdlib>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <optional>
+#include <regex>
+#include <set>
+#include <sstream>
 
+#include "bench_aggregate.hpp"
 #include "commands.hpp"
 #include "stillpoint/common/error.hpp"
 #include "stillpoint/common/timing.hpp"
+#include "stillpoint/eval/evaluate.hpp"
+#include "stillpoint/io/trajectory_io.hpp"
 
 extern char** environ;
 
@@ -27,6 +39,10 @@ struct Variant {
 
 struct BenchArgs {
   std::vector<std::string> sequences;
+  std::string suite;
+  int repeats = 1;
+  std::vector<std::string> variant_specs;  // "name=run args"
+  std::vector<std::string> peers;
   std::string ablation = "none";
   std::string detector_model;
   std::string config;
@@ -204,45 +220,405 @@ void print_loop_table(const nlohmann::json& rows) {
       "time.\n");
 }
 
-void bench(const BenchArgs& args) {
-  const std::vector<std::string> sequences = args.sequences.empty() ? default_sequences() : args.sequences;
-  if (sequences.empty())
-    throw Error("no sequences: pass --sequences DIR... or render the dev set into $DYNSYNTH_DATA");
-  std::string model = args.detector_model;
-  const auto shared_model = std::filesystem::path(SP_SHARED_DIR) / "models" / "yolox_nano.onnx";
-  if (model.empty() && std::filesystem::exists(shared_model)) model = shared_model.string();
-  const std::string self = std::filesystem::read_symlink("/proc/self/exe").string();
-  nlohmann::json rows = nlohmann::json::array();
-  for (const auto& seq : sequences) {
-    const std::string seq_name = std::filesystem::path(seq).filename().string();
-    for (const auto& v : variants_for(args.ablation)) {
-      std::string dir_name = v.name;
-      for (char& c : dir_name) {
-        if (c == ':' || c == ' ' || c == '+') c = '_';
-      }
-      const auto out = std::filesystem::path(args.out) / seq_name / dir_name;
-      std::filesystem::create_directories(out);
-      std::vector<std::string> argv{self, "run", "--dataset", seq, "--out", out.string(), "--no-progress"};
-      if (!model.empty()) argv.insert(argv.end(), {"--detector-model", model});
-      if (!args.config.empty()) argv.insert(argv.end(), {"--config", args.config});
-      if (args.deterministic) argv.emplace_back("--deterministic");
-      if (args.max_frames > 0) argv.insert(argv.end(), {"--max-frames", std::to_string(args.max_frames)});
-      argv.insert(argv.end(), v.args.begin(), v.args.end());
-      argv.insert(argv.end(), args.extra.begin(), args.extra.end());
-      spdlog::info("bench: {} [{}]", seq_name, v.name);
-      const int rc = spawn_and_wait(argv, out / "log.txt");
-      nlohmann::json stats;
-      if (std::ifstream in(out / "stats.json"); in) stats = nlohmann::json::parse(in, nullptr, false);
-      if (stats.is_discarded()) stats = nlohmann::json::object();
-      rows.push_back(summarize_row(seq_name, v, rc, stats));
-      if (rc != 0) spdlog::warn("run failed (exit {}), see {}", rc, (out / "log.txt").string());
+// A sequence to run: its folder and its name in the tables (path relative to the suite).
+struct Sequence {
+  std::filesystem::path dir;
+  std::string name;
+};
+
+// Every folder under `root` with an rgb.txt (not looking inside a sequence), sorted by relative path.
+std::vector<Sequence> discover_suite(const std::filesystem::path& root) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  if (!fs::is_directory(root, ec)) throw Error("--suite " + root.string() + ": no such folder");
+  std::vector<Sequence> out;
+  if (fs::exists(root / "rgb.txt")) return {{root, fs::canonical(root).filename().string()}};
+  for (auto it = fs::recursive_directory_iterator(root, fs::directory_options::skip_permission_denied, ec);
+       !ec && it != fs::recursive_directory_iterator(); it.increment(ec)) {
+    std::error_code entry_ec;  // a broken link is skipped, not an error
+    if (!it->is_directory(entry_ec)) continue;
+    if (fs::exists(it->path() / "rgb.txt")) {
+      out.push_back(
+          {it->path(),
+           it->path().lexically_normal().lexically_relative(root.lexically_normal()).generic_string()});
+      it.disable_recursion_pending();  // rgb/, depth/, masks/ of a sequence hold no sequences
     }
   }
-  print_table(rows);
-  print_loop_table(rows);
-  const std::string json_file =
-      args.json.empty() ? (std::filesystem::path(args.out) / "bench.json").string() : args.json;
-  std::ofstream(json_file) << nlohmann::json{{"runs", rows}}.dump(2) << "\n";
+  if (ec) throw Error("--suite " + root.string() + ": " + ec.message());
+  std::sort(out.begin(), out.end(), [](const Sequence& a, const Sequence& b) { return a.name < b.name; });
+  if (out.empty()) {
+    throw Error("--suite " + root.string() +
+                ": no sequences found (a sequence is a folder with rgb.txt, depth.txt, camera.yaml; "
+                "render the room suite with scripts/room_suite.sh)");
+  }
+  return out;
+}
+
+// "name=--dynamic oracle --keyframe-policy adaptive" -> {name, {--dynamic, oracle, ...}}.
+Variant parse_variant(const std::string& spec) {
+  const auto eq = spec.find('=');
+  if (eq == std::string::npos || eq == 0) {
+    throw Error("--variant '" + spec + "': expected NAME=RUN ARGS (e.g. \"oracle=--dynamic oracle\")");
+  }
+  Variant v{spec.substr(0, eq), {}};
+  if (v.name.rfind("peer:", 0) == 0) throw Error("--variant '" + spec + "': names peer:* are reserved");
+  std::istringstream in(spec.substr(eq + 1));
+  for (std::string a; in >> a;) v.args.push_back(a);
+  return v;
+}
+
+std::vector<Variant> all_variants(const BenchArgs& args) {
+  std::vector<Variant> out;
+  if (args.ablation != "none" || args.variant_specs.empty()) out = variants_for(args.ablation);
+  for (const auto& spec : args.variant_specs) out.push_back(parse_variant(spec));
+  std::set<std::string> names;
+  for (const auto& v : out) {
+    if (!names.insert(v.name).second) throw Error("variant '" + v.name + "' given twice");
+  }
+  return out;
+}
+
+std::string dir_name_of(const std::string& variant) {
+  std::string d = variant;
+  for (char& c : d) {
+    if (c == ':' || c == ' ' || c == '+' || c == '/' || c == '=') c = '_';
+  }
+  return d;
+}
+
+// ---- peers (../shared/tools/peer_<name>/run.sh): detection as run.sh does it -------------------------
+
+std::string env_or(const char* name, const std::string& fallback) {
+  const char* v = std::getenv(name);
+  return v != nullptr && *v != '\0' ? std::string(v) : fallback;
+}
+
+bool nonempty_file(const std::filesystem::path& p) {
+  std::error_code ec;
+  return std::filesystem::is_regular_file(p, ec) && std::filesystem::file_size(p, ec) > 0;
+}
+
+struct Peer {
+  std::string name;              // orbslam2 | ngdslam
+  std::filesystem::path run_sh;  // ../shared/tools/peer_<name>/run.sh
+  std::string missing;           // why it cannot run (empty: built)
+};
+
+Peer find_peer(const std::string& name) {
+  namespace fs = std::filesystem;
+  Peer p{name, fs::path(SP_SHARED_DIR) / "tools" / ("peer_" + name) / "run.sh", {}};
+  if (name != "orbslam2" && name != "ngdslam")
+    throw Error("--peers: unknown peer '" + name + "' (orbslam2|ngdslam)");
+  if (!fs::exists(p.run_sh)) {
+    p.missing = p.run_sh.string() + " not found";
+    return p;
+  }
+  const std::string home = env_or("HOME", "/root");
+  const std::string scratch =
+      env_or("SCRATCH", env_or("XDG_CACHE_HOME", home + "/.cache") + "/stillpoint-peers");
+  const fs::path orb_dir = env_or("ORBSLAM2_DIR", scratch + "/orbslam2");
+  const fs::path dir = name == "orbslam2" ? orb_dir : fs::path(env_or("NGD_DIR", scratch + "/ngdslam"));
+  const fs::path bin = dir / "Examples" / "RGB-D" / "rgbd_tum";
+  std::string voc = env_or("VOC", "");
+  if (voc.empty()) {
+    voc = (dir / "Vocabulary" / "ORBvoc.txt").string();
+    if (!nonempty_file(voc)) voc = (orb_dir / "Vocabulary" / "ORBvoc_trained_k10L5.txt").string();
+  }
+  const std::string setup = (p.run_sh.parent_path() / "setup.sh").string();
+  if (access(bin.c_str(), X_OK) != 0) {
+    p.missing = "not built (" + bin.string() + " missing; build it with " + setup + ")";
+  } else if (!nonempty_file(voc)) {
+    p.missing = "vocabulary " + voc + " missing (see " + p.run_sh.parent_path().string() + "/README.md)";
+  } else if (name == "ngdslam") {
+    const fs::path yolo = env_or("YOLO_DIR", (dir / "Thirdparty" / "YOLO").string());
+    for (const auto& f : {env_or("YOLO_CFG", (yolo / "yolo-fastest-xl.cfg").string()),
+                          env_or("YOLO_WEIGHTS", (yolo / "yolo-fastest-xl.weights").string()),
+                          env_or("YOLO_NAMES", (yolo / "coco.names").string())}) {
+      if (!nonempty_file(f)) p.missing = "detector file " + f + " missing";
+    }
+  }
+  return p;
+}
+
+std::vector<std::string> data_lines(const std::filesystem::path& file) {
+  std::vector<std::string> out;
+  std::ifstream in(file);
+  for (std::string line; std::getline(in, line);) {
+    if (!line.empty() && line[0] != '#' && line.find_first_not_of(" \t\r") != std::string::npos)
+      out.push_back(line);
+  }
+  return out;
+}
+
+// The first `max_frames` frames of a sequence for a peer (which has no --max-frames): a folder whose
+// rgb.txt is cut, everything else linked to the original.
+std::filesystem::path cut_sequence(const std::filesystem::path& seq, std::size_t max_frames,
+                                   const std::filesystem::path& where) {
+  namespace fs = std::filesystem;
+  if (fs::exists(where)) {  // a previous bench's cut: only links and rgb.txt, nothing else is removed
+    for (const auto& e : fs::directory_iterator(where)) {
+      if (!e.is_symlink() && e.path().filename() != "rgb.txt")
+        throw Error("refusing to reuse " + where.string() + ": it holds " + e.path().filename().string());
+    }
+    for (const auto& e : std::vector<fs::directory_entry>(fs::directory_iterator(where), {}))
+      fs::remove(e.path());
+  }
+  fs::create_directories(where);
+  for (const auto& e : fs::directory_iterator(seq)) {
+    if (e.path().filename() == "rgb.txt") continue;
+    fs::create_symlink(fs::absolute(e.path()), where / e.path().filename());
+  }
+  const auto rgb = data_lines(seq / "rgb.txt");
+  std::ofstream out(where / "rgb.txt");
+  for (std::size_t i = 0; i < rgb.size() && i < max_frames; ++i) out << rgb[i] << "\n";
+  return where;
+}
+
+std::optional<double> number_after(const std::string& text, const std::regex& re) {
+  std::smatch m;
+  std::optional<double> last;
+  for (auto it = text.cbegin(); std::regex_search(it, text.cend(), m, re); it = m[0].second) {
+    try {
+      last = std::stod(m[1].str());
+    } catch (const std::exception&) {
+    }
+  }
+  return last;
+}
+
+// Runs a peer on one sequence into `out`, evaluates its trajectory with our eval code and writes
+// out/stats.json in the shape `run` writes (frames, lost_frames, fps, stages_ms.frame, eval).
+std::pair<int, nlohmann::json> run_peer(const Peer& peer, const std::filesystem::path& seq,
+                                        const std::filesystem::path& out) {
+  const auto traj = out / "trajectory.txt";
+  std::filesystem::remove(traj);
+  const auto t0 = std::chrono::steady_clock::now();
+  const int rc =
+      spawn_and_wait({"/bin/bash", peer.run_sh.string(), seq.string(), traj.string()}, out / "log.txt");
+  const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  nlohmann::json s = nlohmann::json::object();
+  const auto frames = data_lines(seq / "rgb.txt").size();
+  s["peer"] = peer.name;
+  s["dataset"] = seq.string();
+  s["frames"] = frames;
+  std::string log;
+  for (const auto& f : {out / "log.txt", std::filesystem::path(traj.string() + ".log")}) {
+    std::ifstream in(f);
+    log += std::string(std::istreambuf_iterator<char>(in), {}) + "\n";
+  }
+  // run.sh prints the wall time of the SLAM binary alone (without its settings/association step).
+  const double slam_wall = number_after(log, std::regex(R"(wall=([0-9.]+)s)")).value_or(wall);
+  s["wall_s"] = slam_wall;
+  s["fps"] = slam_wall > 0 ? static_cast<double>(frames) / slam_wall : 0.0;
+  if (const auto t = number_after(log, std::regex(R"(median tracking time:\s*([0-9.eE+-]+))"))) {
+    s["stages_ms"]["frame"] = {{"median_ms", *t * 1000.0}};
+  }
+  if (nonempty_file(traj)) {
+    try {
+      const auto est = io::read_tum_trajectory(traj);
+      s["tracked_frames"] = est.size();
+      s["lost_frames"] = frames > est.size() ? frames - est.size() : 0;
+      if (std::filesystem::exists(seq / "groundtruth.txt")) {
+        const auto gt = io::read_tum_trajectory(seq / "groundtruth.txt");
+        s["eval"] = eval::to_json(eval::evaluate(gt, est, eval::EvalOptions{}));
+      }
+    } catch (const std::exception& e) {
+      spdlog::warn("peer {}: evaluation failed: {}", peer.name, e.what());
+    }
+  } else {
+    s["lost_frames"] = frames;
+  }
+  std::ofstream(out / "stats.json") << s.dump(2) << "\n";
+  return {rc == 0 && !nonempty_file(traj) ? 2 : rc, s};
+}
+
+// ---- tables over repeats and sequences --------------------------------------------------------------
+
+std::string fmt_opt(const std::optional<double>& v, const char* f = "{:.2f}") {
+  return v ? fmt::format(fmt::runtime(f), *v) : std::string("-");
+}
+
+void print_aggregate_table(const std::vector<bench::AggregateRow>& rows, int repeats) {
+  std::size_t w = 28;
+  for (const auto& r : rows) w = std::max(w, r.sequence.size());
+  fmt::print("\nMedians over {} repeat(s) per sequence and variant\n", repeats);
+  fmt::print("{:<{}} {:<24} {:>4} | {:>7} {:>15} {:>7} | {:>6} {:>6} {:>7} | {:>5} {:>5}\n", "sequence", w,
+             "variant", "runs", "ATE", "ATE min-max", "maxErr", "lost", "FPS", "trk ms", "cullP", "cullR");
+  fmt::print("{:<{}} {:<24} {:>4} | {:>7} {:>15} {:>7} | {:>6} {:>6} {:>7} | {:>5} {:>5}\n", "", w, "", "",
+             "cm", "cm", "cm", "", "", "median", "", "");
+  for (const auto& r : rows) {
+    const std::string spread =
+        r.ate_min_cm ? fmt::format("{:.2f}-{:.2f}", *r.ate_min_cm, *r.ate_max_cm) : std::string("-");
+    fmt::print("{:<{}} {:<24} {:>4} | {:>7} {:>15} {:>7} | {:>6} {:>6} {:>7} | {:>5} {:>5}{}\n", r.sequence,
+               w, r.variant, r.runs, fmt_opt(r.ate_cm), spread, fmt_opt(r.max_error_cm),
+               fmt_opt(r.lost_frames, "{:.0f}"), fmt_opt(r.fps, "{:.1f}"), fmt_opt(r.track_ms, "{:.1f}"),
+               fmt_opt(r.cull_precision), fmt_opt(r.cull_recall),
+               r.failed > 0 ? fmt::format("  ({} failed)", r.failed) : std::string());
+  }
+  fmt::print(
+      "ATE = RMSE after SE(3) alignment; maxErr = largest per-frame translation error after the same "
+      "alignment;\ncullP/cullR = culling precision/recall against the ground-truth masks (stats.json "
+      "culling_score).\n");
+}
+
+void print_summary(const std::vector<bench::SummaryRow>& rows, const std::string& oracle) {
+  std::size_t w = 24;
+  for (const auto& r : rows) w = std::max(w, r.variant.size());
+  fmt::print("\nSummary per variant over the sequences (per-sequence medians over repeats)\n");
+  fmt::print("{:<12} {:<{}} {:>4} | {:>7} {:>7} {:>8} | {:>6} {:>6} | {:>7} {:>7} | {:>4}\n", "group",
+             "variant", w, "seqs", "ATE med", "ATE max", "maxErr", "lost", "FPS", "/oracle", "/oracle",
+             "fail");
+  fmt::print("{:<12} {:<{}} {:>4} | {:>7} {:>7} {:>8} | {:>6} {:>6} | {:>7} {:>7} | {:>4}\n", "", "", w, "",
+             "cm", "cm", "worst cm", "total", "median", "median", "worst", "runs");
+  std::string group;
+  for (const auto& r : rows) {
+    if (!group.empty() && r.group != group) fmt::print("\n");
+    group = r.group;
+    const std::string seqs = r.with_ate == r.sequences ? fmt::format("{}", r.sequences)
+                                                       : fmt::format("{}/{}", r.with_ate, r.sequences);
+    fmt::print("{:<12} {:<{}} {:>4} | {:>7} {:>7} {:>8} | {:>6.0f} {:>6} | {:>7} {:>7} | {:>4}\n", r.group,
+               r.variant, w, seqs, fmt_opt(r.ate_median_cm), fmt_opt(r.ate_worst_cm),
+               fmt_opt(r.max_error_worst_cm), r.lost_frames_total, fmt_opt(r.fps_median, "{:.1f}"),
+               fmt_opt(r.oracle_ratio_median), fmt_opt(r.oracle_ratio_worst), r.failed_runs);
+  }
+  fmt::print(
+      "seqs = sequences with an ATE (/ run); ATE max = worst sequence; fail = runs with a non-zero exit.\n");
+  if (oracle.empty()) {
+    fmt::print("/oracle: no oracle variant ran (add one, e.g. --variant \"oracle=--dynamic oracle\").\n");
+  } else {
+    fmt::print("/oracle = ATE / ATE of '{}' on the same sequence.\n", oracle);
+  }
+}
+
+void run_bench(const BenchArgs& args) {
+  namespace fs = std::filesystem;
+  if (args.repeats < 1) throw Error("--repeats must be at least 1");
+  std::vector<Sequence> sequences;
+  if (!args.suite.empty()) sequences = discover_suite(args.suite);
+  const std::vector<std::string> listed =
+      args.sequences.empty() && args.suite.empty() ? default_sequences() : args.sequences;
+  for (const auto& s : listed) sequences.push_back({s, fs::path(s).filename().string()});
+  if (sequences.empty())
+    throw Error(
+        "no sequences: pass --suite DIR, --sequences DIR... or render the dev set into $DYNSYNTH_DATA");
+  std::set<std::string> seen;
+  for (const auto& s : sequences) {
+    // The name becomes a folder under --out: it must stay inside it.
+    const fs::path name(s.name);
+    if (s.name.empty() || name.is_absolute() ||
+        std::any_of(name.begin(), name.end(), [](const fs::path& c) { return c == ".." || c == "."; }))
+      throw Error("sequence " + s.dir.string() + ": cannot use '" + s.name + "' as an output folder name");
+    if (!seen.insert(s.name).second)
+      throw Error("two sequences named '" + s.name + "' (" + s.dir.string() + ")");
+  }
+  const std::vector<Variant> variants = all_variants(args);
+  std::string oracle;
+  for (const auto& v : variants) {
+    if (oracle.empty() && bench::is_oracle_variant(v.name, v.args)) oracle = v.name;
+  }
+  std::vector<Peer> peers;
+  nlohmann::json skipped_peers = nlohmann::json::array();
+  for (const auto& name : args.peers) {
+    Peer p = find_peer(name);
+    if (!p.missing.empty()) {
+      spdlog::warn("peer {} skipped: {}", name, p.missing);
+      skipped_peers.push_back({{"peer", name}, {"reason", p.missing}});
+    } else {
+      peers.push_back(std::move(p));
+    }
+  }
+
+  std::string model = args.detector_model;
+  const auto shared_model = fs::path(SP_SHARED_DIR) / "models" / "yolox_nano.onnx";
+  if (model.empty() && fs::exists(shared_model)) model = shared_model.string();
+  const std::string self = fs::read_symlink("/proc/self/exe").string();
+  const std::size_t total = sequences.size() * (variants.size() + peers.size()) * args.repeats;
+  std::size_t done = 0;
+  nlohmann::json rows = nlohmann::json::array();
+  std::vector<bench::RunMetrics> metrics;
+  auto rep_dir = [&](const fs::path& base, int rep) {
+    return args.repeats > 1 ? base / ("rep" + std::to_string(rep)) : base;
+  };
+  auto record = [&](const Sequence& seq, const std::string& variant, const std::vector<std::string>& vargs,
+                    int rep, int rc, const nlohmann::json& stats, const fs::path& out) {
+    nlohmann::json row = summarize_row(seq.name, Variant{variant, vargs}, rc, stats);
+    row["repeat"] = rep;
+    row["sequence_dir"] = seq.dir.string();
+    row["variant_args"] = vargs;
+    row["out"] = out.string();
+    if (row.contains("ate")) row["max_frame_error"] = row["ate"].value("max", 0.0);  // metres
+    metrics.push_back(bench::metrics_from_row(row));
+    rows.push_back(std::move(row));
+    if (rc != 0) spdlog::warn("run failed (exit {}), see {}", rc, (out / "log.txt").string());
+  };
+
+  for (const auto& seq : sequences) {
+    for (const auto& v : variants) {
+      for (int rep = 0; rep < args.repeats; ++rep) {
+        const auto out = rep_dir(fs::path(args.out) / seq.name / dir_name_of(v.name), rep);
+        fs::create_directories(out);
+        fs::remove(out / "stats.json");  // never read a previous bench's figures
+        std::vector<std::string> argv{self,    "run",        "--dataset",    seq.dir.string(),
+                                      "--out", out.string(), "--no-progress"};
+        if (!model.empty()) argv.insert(argv.end(), {"--detector-model", model});
+        if (!args.config.empty()) argv.insert(argv.end(), {"--config", args.config});
+        if (args.deterministic) argv.emplace_back("--deterministic");
+        if (args.max_frames > 0) argv.insert(argv.end(), {"--max-frames", std::to_string(args.max_frames)});
+        argv.insert(argv.end(), v.args.begin(), v.args.end());
+        argv.insert(argv.end(), args.extra.begin(), args.extra.end());
+        spdlog::info("bench [{}/{}]: {} [{}]{}", ++done, total, seq.name, v.name,
+                     args.repeats > 1 ? fmt::format(" rep {}", rep) : std::string());
+        const int rc = spawn_and_wait(argv, out / "log.txt");
+        nlohmann::json stats;
+        if (std::ifstream in(out / "stats.json"); in) stats = nlohmann::json::parse(in, nullptr, false);
+        if (stats.is_discarded() || stats.is_null()) stats = nlohmann::json::object();
+        record(seq, v.name, v.args, rep, rc, stats, out);
+      }
+    }
+    for (const auto& peer : peers) {
+      const std::string name = "peer:" + peer.name;
+      const auto base = fs::path(args.out) / seq.name / dir_name_of(name);
+      fs::path input = seq.dir;
+      if (args.max_frames > 0) input = cut_sequence(seq.dir, args.max_frames, base / "input");
+      for (int rep = 0; rep < args.repeats; ++rep) {
+        const auto out = rep_dir(base, rep);
+        fs::create_directories(out);
+        spdlog::info("bench [{}/{}]: {} [{}]{}", ++done, total, seq.name, name,
+                     args.repeats > 1 ? fmt::format(" rep {}", rep) : std::string());
+        const auto [rc, stats] = run_peer(peer, input, out);
+        record(seq, name, {}, rep, rc, stats, out);
+      }
+    }
+  }
+
+  const bool suite_mode =
+      !args.suite.empty() || args.repeats > 1 || !args.variant_specs.empty() || !peers.empty();
+  if (args.suite.empty()) {
+    print_table(rows);
+    print_loop_table(rows);
+  }
+  const auto aggregated = bench::aggregate_repeats(metrics);
+  const auto summary = bench::summarize(aggregated, oracle);
+  if (suite_mode) print_aggregate_table(aggregated, args.repeats);
+  print_summary(summary, oracle);
+  for (const auto& s : skipped_peers) {
+    fmt::print("peer {} skipped: {}\n", s["peer"].get<std::string>(), s["reason"].get<std::string>());
+  }
+
+  nlohmann::json j{{"runs", rows}, {"repeats", args.repeats}, {"oracle_variant", oracle}};
+  if (!args.suite.empty()) j["suite"] = args.suite;
+  j["variants"] = nlohmann::json::array();
+  for (const auto& v : variants) j["variants"].push_back({{"name", v.name}, {"args", v.args}});
+  for (const auto& p : peers)
+    j["variants"].push_back({{"name", "peer:" + p.name}, {"run_sh", p.run_sh.string()}});
+  j["peers_skipped"] = skipped_peers;
+  j["aggregated"] = nlohmann::json::array();
+  for (const auto& r : aggregated) j["aggregated"].push_back(bench::to_json(r));
+  j["summary"] = nlohmann::json::array();
+  for (const auto& r : summary) j["summary"].push_back(bench::to_json(r));
+  const std::string json_file = args.json.empty() ? (fs::path(args.out) / "bench.json").string() : args.json;
+  fs::create_directories(fs::absolute(json_file).parent_path());
+  std::ofstream(json_file) << j.dump(2) << "\n";
   fmt::print("JSON: {}\n", json_file);
 }
 
@@ -251,22 +627,49 @@ void bench(const BenchArgs& args) {
 void add_bench_command(CLI::App& app) {
   auto args = std::make_shared<BenchArgs>();
   CLI::App* cmd = app.add_subcommand(
-      "bench", "Benchmark: sequences x variants -> one table (ATE/RPE, ms per stage, memory) + JSON");
+      "bench",
+      "Benchmark: sequences x variants x repeats -> tables (ATE/RPE, ms per stage, memory; medians over "
+      "repeats and a per-variant summary) + JSON");
   cmd->add_option("--sequences", args->sequences,
-                  "Sequence folders (default: the dev set in $DYNSYNTH_DATA + the real kitchen)");
+                  "Sequence folders (default without --suite: the dev set in $DYNSYNTH_DATA + the real "
+                  "kitchen); named by their folder name");
+  cmd->add_option("--suite", args->suite,
+                  "Run every sequence folder (one with rgb.txt) found recursively under DIR, named by its "
+                  "path relative to DIR (e.g. tune/room101_walking_xyz); the summary is also grouped by the "
+                  "first path component (tune / heldout)");
+  cmd->add_option("--repeats", args->repeats,
+                  "Runs per sequence and variant (outputs in OUT/SEQ/VARIANT/rep0, rep1, ... when > 1); the "
+                  "tables report medians and the ATE spread (use 3 for threaded figures)")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
+  cmd->add_option("--variant,--variants", args->variant_specs,
+                  "Custom variant NAME=RUN ARGS, repeatable (e.g. --variant \"oracle=--dynamic oracle\" "
+                  "--variant \"adaptive=--keyframe-policy adaptive\"); run args split on spaces. Added to "
+                  "--ablation's variants; without --ablation only the custom variants run ('NAME=' is the "
+                  "default configuration)");
+  cmd->add_option(
+         "--peers", args->peers,
+         "Also run peer systems, comma-separated: orbslam2,ngdslam (../shared/tools/peer_*/run.sh, "
+         "evaluated with our ATE code; shown as variants peer:NAME; FPS = frames / wall time of the "
+         "peer's binary, which plays back in real time). A peer that is not built is skipped with a warning")
+      ->delimiter(',')
+      ->check(CLI::IsMember({"orbslam2", "ngdslam"}));
   cmd->add_option("--ablation", args->ablation, "none|dynamic (Table V)|keyframes (culling x adaptive)|loop")
       ->capture_default_str();
   cmd->add_option("--detector-model", args->detector_model,
                   "YOLO model (default: ../shared/models/yolox_nano.onnx if present)");
   cmd->add_option("--config", args->config, "System configuration YAML");
   cmd->add_option("--out", args->out, "Folder for the runs' outputs")->capture_default_str();
-  cmd->add_option("--json", args->json, "JSON file (default: OUT/bench.json)");
+  cmd->add_option("--json", args->json,
+                  "JSON file (default: OUT/bench.json): every run, the medians per sequence and variant "
+                  "(aggregated) and the per-variant summary");
   cmd->add_flag("--deterministic", args->deterministic,
                 "Run every sequence in deterministic (lock-step) mode");
-  cmd->add_option("--max-frames", args->max_frames, "Frames per sequence (0 = all)");
+  cmd->add_option("--max-frames", args->max_frames,
+                  "Frames per sequence (0 = all; peers get a copy of the sequence cut to as many frames)");
   cmd->add_option("--run-args", args->extra,
                   "Extra arguments for every run (e.g. --run-args=--loop-detector --run-args=off)");
-  cmd->callback([args] { bench(*args); });
+  cmd->callback([args] { run_bench(*args); });
 }
 
 }  // namespace sp::app
