@@ -6,6 +6,7 @@
 #include <map>
 #include <opencv2/imgcodecs.hpp>
 
+#include "../support/shared_data.hpp"
 #include "stillpoint/common/error.hpp"
 #include "stillpoint/dynamic/dynamic_filter.hpp"
 #include "stillpoint/dynamic/yolo_detector.hpp"
@@ -21,8 +22,13 @@ struct Expect {
   int lo, hi;  // accepted person count (by-eye counts of data/people/README.md, with slack)
 };
 
-// By-eye counts with slack: the tiny models miss one or two of the four bus passengers (measured:
-// YOLOX-nano 3, Yolo-Fastest 2, body 3), and messi5's blurred crowd adds legitimate persons (3-7).
+// Bounds from the by-eye counts of ../shared/data/people/README.md (no annotation files exist), not
+// from a run. Lower: negatives give 0; large, unoccluded people must all be found (darknet_person 1,
+// zidane 2, messi5's one large player); where people are small, partly hidden or cut off, at least
+// half of the count (bus 4 → 2, basketball 2 → 1). Upper: the count plus the partial people the README
+// names, plus one or two for counts the README calls approximate (bus 4 + 1 cut-off → 6, zidane 2 → 3,
+// darknet_person exactly 1, basketball 2 → 4); messi5's blurred crowd holds persons nobody counted, so
+// up to 10 is accepted.
 const Expect kImages[] = {{"yolov5_bus.jpg", 2, 6},
                           {"yolov5_zidane.jpg", 2, 3},
                           {"darknet_person.jpg", 1, 1},
@@ -35,7 +41,7 @@ const Expect kImages[] = {{"yolov5_bus.jpg", 2, 6},
                           {"neg_opencv_hfs_001_lake.jpg", 0, 0}};
 
 void check_model(const std::filesystem::path& model) {
-  if (!std::filesystem::exists(model) || !std::filesystem::exists(kPeople)) GTEST_SKIP() << "no " << model;
+  SP_REQUIRE_SHARED(model, kPeople);
   YoloDetector det(DetectorConfig::for_model(model));
   for (const auto& e : kImages) {
     const cv::Mat img = cv::imread((kPeople / e.file).string(), cv::IMREAD_COLOR);
@@ -60,7 +66,7 @@ TEST(YoloDetector, YoloFastestBodyFindsPeople) { check_model(kModels / "yolo-fas
 
 TEST(YoloDetector, PersonBoxInDarknetPhotoIsWhereThePersonIs) {
   const auto model = kModels / "yolox_nano.onnx";
-  if (!std::filesystem::exists(model)) GTEST_SKIP();
+  SP_REQUIRE_SHARED(model, kPeople / "darknet_person.jpg");
   YoloDetector det(DetectorConfig::for_model(model));
   const cv::Mat img = cv::imread((kPeople / "darknet_person.jpg").string());
   ASSERT_FALSE(img.empty());
@@ -120,7 +126,7 @@ TEST(YoloDetector, OverlongModelPathInYamlIsJustNotFound) {
 
 TEST(YoloDetector, ConfigFromModelPathAndYaml) {
   const auto cfgfile = kModels / "yolo-fastest-1.1.cfg";
-  if (!std::filesystem::exists(cfgfile)) GTEST_SKIP();
+  SP_REQUIRE_SHARED(cfgfile, kModels / "yolox_nano.onnx");
   const DetectorConfig c = DetectorConfig::for_model(cfgfile);
   EXPECT_EQ(c.decoder, "darknet");
   EXPECT_EQ(c.input_width, 320);
@@ -169,7 +175,7 @@ TEST(DetectorConfigFiles, ShippedExamplesParse) {
 TEST(DetectorConfigFiles, ShippedYoloxConfigFindsThePerson) {
   const std::filesystem::path f = SP_SOURCE_DIR "/config/dynamic/yolox_nano.yaml";
   const DetectorConfig c = DetectorConfig::from_yaml(ConfigReader::from_file(f));
-  if (!std::filesystem::exists(c.model)) GTEST_SKIP() << "no " << c.model;
+  SP_REQUIRE_SHARED(c.model, kPeople / "darknet_person.jpg");
   YoloDetector det(c);
   const cv::Mat img = cv::imread((kPeople / "darknet_person.jpg").string());
   ASSERT_FALSE(img.empty());

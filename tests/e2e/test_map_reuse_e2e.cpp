@@ -9,6 +9,7 @@
 #include <fstream>
 #include <functional>
 
+#include "../support/shared_data.hpp"
 #include "stillpoint/common/error.hpp"
 #include "stillpoint/io/trajectory_io.hpp"
 #include "stillpoint/io/tum_sequence.hpp"
@@ -97,7 +98,7 @@ FrameCheck check_in_first_frame(const std::filesystem::path& first_trajectory_fi
 }
 
 TEST(MapReuse, SecondRunRelocalisesInTheSavedMapAndContinuesInItsFrame) {
-  if (!std::filesystem::exists(kSequence)) GTEST_SKIP() << "../shared data missing";
+  SP_REQUIRE_SHARED(kSequence);
   const auto dir = scratch("reuse");
   const auto map_file = dir / "office_a.spmap";
 
@@ -193,7 +194,7 @@ TEST(MapReuse, SecondRunRelocalisesInTheSavedMapAndContinuesInItsFrame) {
 }
 
 TEST(MapReuse, DamagedMapIsRefusedBeforeTheFirstFrame) {
-  if (!std::filesystem::exists(kSequence)) GTEST_SKIP() << "../shared data missing";
+  SP_REQUIRE_SHARED(kSequence);
   const auto dir = scratch("damaged");
   const auto file = dir / "not_a_map.spmap";
   {

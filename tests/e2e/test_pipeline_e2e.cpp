@@ -7,6 +7,7 @@
 #include <fstream>
 #include <sstream>
 
+#include "../support/shared_data.hpp"
 #include "stillpoint/io/tum_sequence.hpp"
 #include "stillpoint/pipeline/runner.hpp"
 
@@ -51,7 +52,7 @@ RunResult run(const std::string& sequence, const std::string& out_name, const st
 class EndToEnd : public ::testing::Test {
  protected:
   void SetUp() override {
-    if (!std::filesystem::exists(kData / "office_a_static_xyz_150")) GTEST_SKIP() << "../shared data missing";
+    SP_REQUIRE_SHARED(kData / "office_a_static_xyz_150", kData / "office_a_walking_xyz_150");
   }
 };
 

@@ -3,6 +3,7 @@
 
 #include <fstream>
 
+#include "../support/shared_data.hpp"
 #include "stillpoint/eval/evaluate.hpp"
 #include "stillpoint/io/trajectory_io.hpp"
 
@@ -27,12 +28,14 @@ void expect_matches(const EvalResult& r, const std::filesystem::path& expected_f
 }
 
 TEST(CaseA, ReproducesTumScriptsWithDeltaOneSecond) {
+  SP_REQUIRE_SHARED(kCase / "gt.txt", kCase / "est.txt");
   const auto gt = io::read_tum_trajectory(kCase / "gt.txt");
   const auto est = io::read_tum_trajectory(kCase / "est.txt");
   expect_matches(evaluate(gt, est, {}), kCase / "expected.json");
 }
 
 TEST(CaseA, ReproducesTumScriptsWithDeltaThirtyFrames) {
+  SP_REQUIRE_SHARED(kCase / "gt.txt", kCase / "est.txt");
   const auto gt = io::read_tum_trajectory(kCase / "gt.txt");
   const auto est = io::read_tum_trajectory(kCase / "est.txt");
   EvalOptions o;

@@ -2,6 +2,7 @@
 
 #include <opencv2/imgcodecs.hpp>
 
+#include "../support/shared_data.hpp"
 #include "stillpoint/common/error.hpp"
 #include "stillpoint/eval/evaluate.hpp"
 #include "stillpoint/io/trajectory_io.hpp"
@@ -18,6 +19,7 @@ int count_colour(const cv::Mat& img, const cv::Vec3b& bgr) {
 }
 
 TEST(Plot, DrawsBothTrajectoriesAndTheErrors) {
+  SP_REQUIRE_SHARED(SP_SHARED_DIR "/data/eval/case_a/gt.txt", SP_SHARED_DIR "/data/eval/case_a/est.txt");
   const std::filesystem::path dir = SP_SHARED_DIR "/data/eval/case_a";
   const auto r =
       evaluate(io::read_tum_trajectory(dir / "gt.txt"), io::read_tum_trajectory(dir / "est.txt"), {});

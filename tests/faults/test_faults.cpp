@@ -16,6 +16,7 @@
 #include <string>
 #include <vector>
 
+#include "../support/shared_data.hpp"
 #include "stillpoint/common/error.hpp"
 #include "stillpoint/io/fake_source.hpp"
 #include "stillpoint/io/openni2_source.hpp"
@@ -140,7 +141,7 @@ Outcome run(const Sequence& seq) {
 class Faults : public ::testing::Test {
  protected:
   void SetUp() override {
-    if (!fs::exists(kSource / "associations.txt")) GTEST_SKIP() << "../shared data missing";
+    SP_REQUIRE_SHARED(kSource / "associations.txt");
     all_ = source_frames();
     ASSERT_GE(all_.size(), 150u);
   }

@@ -7,6 +7,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "../support/shared_data.hpp"
 #include "stillpoint/common/error.hpp"
 #include "stillpoint/features/matching.hpp"
 #include "stillpoint/features/orb_extractor.hpp"
@@ -14,11 +15,12 @@
 namespace sp::feat {
 namespace {
 
+const std::filesystem::path kFrames =
+    std::filesystem::path(SP_SHARED_DIR) / "data/dynsynth/office_a_static_xyz_150/rgb";
+
 cv::Mat load_frame(int index = 0) {
-  const std::filesystem::path dir =
-      std::filesystem::path(SP_SHARED_DIR) / "data/dynsynth/office_a_static_xyz_150/rgb";
   std::vector<std::filesystem::path> files;
-  for (const auto& e : std::filesystem::directory_iterator(dir)) files.push_back(e.path());
+  for (const auto& e : std::filesystem::directory_iterator(kFrames)) files.push_back(e.path());
   std::sort(files.begin(), files.end());
   if (files.size() <= static_cast<std::size_t>(index)) return {};
   return cv::imread(files[static_cast<std::size_t>(index)].string(), cv::IMREAD_GRAYSCALE);
@@ -88,6 +90,7 @@ TEST(OrbExtractor, ConfigFromYamlChecksRanges) {
 }
 
 TEST(OrbExtractor, CountNearTargetAndOutputLayout) {
+  SP_REQUIRE_SHARED(kFrames);
   const cv::Mat img = load_frame();
   ASSERT_FALSE(img.empty());
   OrbExtractor orb(OrbConfig{});
@@ -118,6 +121,7 @@ TEST(OrbExtractor, CountNearTargetAndOutputLayout) {
 }
 
 TEST(OrbExtractor, SpatiallyUniformerThanFastTopN) {
+  SP_REQUIRE_SHARED(kFrames);
   const cv::Mat img = load_frame();
   ASSERT_FALSE(img.empty());
   OrbExtractor orb(OrbConfig{});
@@ -166,6 +170,7 @@ TEST(OrbExtractor, SpatiallyUniformerThanFastTopN) {
 }
 
 TEST(OrbExtractor, MaskIsRespected) {
+  SP_REQUIRE_SHARED(kFrames);
   const cv::Mat img = load_frame();
   ASSERT_FALSE(img.empty());
   cv::Mat mask(img.size(), CV_8UC1, cv::Scalar(255));
@@ -182,6 +187,7 @@ TEST(OrbExtractor, MaskIsRespected) {
 }
 
 TEST(OrbExtractor, DeterministicAndParallelIdentical) {
+  SP_REQUIRE_SHARED(kFrames);
   const cv::Mat img = load_frame(5);
   ASSERT_FALSE(img.empty());
   OrbExtractor a(OrbConfig{});
@@ -202,6 +208,7 @@ TEST(OrbExtractor, DeterministicAndParallelIdentical) {
 }
 
 TEST(OrbExtractor, InvariantToRotation30) {
+  SP_REQUIRE_SHARED(kFrames);
   const cv::Mat img = load_frame();
   ASSERT_FALSE(img.empty());
   const cv::Point2f centre(0.5f * (img.cols - 1), 0.5f * (img.rows - 1));
@@ -225,6 +232,7 @@ TEST(OrbExtractor, InvariantToRotation30) {
 }
 
 TEST(OrbExtractor, InvariantToRotation90WithConsistentAngles) {
+  SP_REQUIRE_SHARED(kFrames);
   const cv::Mat img = load_frame();
   ASSERT_FALSE(img.empty());
   cv::Mat turned;
@@ -257,6 +265,7 @@ TEST(OrbExtractor, InvariantToRotation90WithConsistentAngles) {
 }
 
 TEST(OrbExtractor, InvariantToScale144) {
+  SP_REQUIRE_SHARED(kFrames);
   const cv::Mat img = load_frame();
   ASSERT_FALSE(img.empty());
   const double s = 1.44;

@@ -6,6 +6,7 @@
 #include <random>
 #include <tuple>
 
+#include "../support/shared_data.hpp"
 #include "stillpoint/io/association.hpp"
 #include "stillpoint/io/tum_text.hpp"
 
@@ -80,6 +81,7 @@ TEST(Associate, AgreesWithBruteForceOnJitteredStreams) {
 }
 
 TEST(Associate, ReproducesTheShippedAssociationsOfADynsynthSequence) {
+  SP_REQUIRE_SHARED(SP_SHARED_DIR "/data/dynsynth/office_a_static_xyz_150/associations.txt");
   const std::filesystem::path dir = SP_SHARED_DIR "/data/dynsynth/office_a_static_xyz_150";
   const auto rgb = read_tum_file_list(dir / "rgb.txt");
   const auto depth = read_tum_file_list(dir / "depth.txt");

@@ -1,5 +1,6 @@
 #include <gtest/gtest.h>
 
+#include "../support/shared_data.hpp"
 #include "stillpoint/common/error.hpp"
 #include "stillpoint/io/camera_config.hpp"
 #include "test_util.hpp"
@@ -76,6 +77,7 @@ TEST(CameraConfig, NonNumericValueIsAConfigError) {
 }
 
 TEST(CameraConfig, ShippedPresetsAndSharedSequenceLoad) {
+  SP_REQUIRE_SHARED(SP_SHARED_DIR "/data/dynsynth/office_a_static_xyz_150/camera.yaml");
   const std::filesystem::path presets = SP_SOURCE_DIR "/config/camera";
   const auto fr1 = load_camera_config(presets / "tum_fr1.yaml");
   EXPECT_NEAR(fr1.intrinsics.fx, 517.3, 0.01);

@@ -1,8 +1,13 @@
 #include <gtest/gtest.h>
 
+#include <chrono>
+#include <future>
+#include <memory>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <thread>
 
+#include "../support/shared_data.hpp"
 #include "stillpoint/common/error.hpp"
 #include "stillpoint/io/tum_sequence.hpp"
 #include "stillpoint/io/tum_text.hpp"
@@ -15,6 +20,7 @@ namespace fs = std::filesystem;
 const fs::path kSeq = SP_SHARED_DIR "/data/dynsynth/office_a_static_xyz_150";
 
 TEST(TumSequence, ReadsTheWholeSharedSequence) {
+  SP_REQUIRE_SHARED(kSeq / "associations.txt");
   TumSequence seq(kSeq);
   const auto assoc = read_tum_text(kSeq / "associations.txt", 4);
   ASSERT_EQ(seq.size_hint(), 150u);
@@ -56,6 +62,7 @@ TEST(TumSequence, ReadsTheWholeSharedSequence) {
 }
 
 TEST(TumSequence, StartAndMaxFramesSelectAWindow) {
+  SP_REQUIRE_SHARED(kSeq / "associations.txt");
   TumSequenceOptions o;
   o.start_frame = 5;
   o.max_frames = 4;
@@ -67,14 +74,32 @@ TEST(TumSequence, StartAndMaxFramesSelectAWindow) {
   EXPECT_EQ(idx, (std::vector<std::size_t>{5, 6, 7, 8}));
 }
 
+// The reader thread blocks on the full prefetch queue; the destructor must wake and join it. The
+// destruction runs on a detached thread so that a hang is reported as a failure after a bounded wait
+// (generous: the whole body reads 3 frames; this is a hang detector, not a timing check) instead of
+// blocking the test binary until CTest's timeout.
 TEST(TumSequence, DestructorStopsTheReaderMidSequence) {
+  SP_REQUIRE_SHARED(kSeq / "associations.txt");
   TumSequenceOptions o;
   o.prefetch = 2;
-  for (int k = 0; k < 3; ++k) {
-    TumSequence seq(kSeq, o);
-    ASSERT_TRUE(seq.next().has_value());
-  }  // would hang here if the reader stayed blocked on the full queue
-  SUCCEED();
+  auto first_frames = std::make_shared<std::promise<int>>();
+  std::future<int> done = first_frames->get_future();
+  std::thread([first_frames, o, dir = kSeq] {
+    int got = 0;
+    try {
+      for (int k = 0; k < 3; ++k) {
+        TumSequence seq(dir, o);
+        got += seq.next().has_value() ? 1 : 0;
+        std::this_thread::sleep_for(std::chrono::milliseconds(100));  // the reader fills the queue
+      }  // the destructor stops the reader blocked on the full queue
+      first_frames->set_value(got);
+    } catch (...) {
+      first_frames->set_exception(std::current_exception());
+    }
+  }).detach();
+  ASSERT_EQ(done.wait_for(std::chrono::seconds(30)), std::future_status::ready)
+      << "TumSequence's destructor did not return within 30 s: the reader thread stayed blocked";
+  EXPECT_EQ(done.get(), 3);  // each of the three sequences gave its first frame before being destroyed
 }
 
 // A 10-frame copy without associations.txt (so rgb.txt/depth.txt are associated), with frame 3's colour
@@ -103,6 +128,7 @@ fs::path damaged_copy() {
 }
 
 TEST(TumSequence, BadFramesAreSkippedCountedAndTheRunGoesOn) {
+  SP_REQUIRE_SHARED(kSeq / "associations.txt");
   const fs::path dir = damaged_copy();
   TumSequence seq(dir);
   EXPECT_EQ(seq.size_hint(), 10u);
@@ -117,6 +143,7 @@ TEST(TumSequence, BadFramesAreSkippedCountedAndTheRunGoesOn) {
 }
 
 TEST(TumSequence, CameraFileOptionAndMissingCamera) {
+  SP_REQUIRE_SHARED(kSeq / "associations.txt");
   const fs::path dir = damaged_copy();
   fs::remove(dir / "camera.yaml");
   EXPECT_THROW(TumSequence seq(dir), InputError);
@@ -128,6 +155,7 @@ TEST(TumSequence, CameraFileOptionAndMissingCamera) {
 }
 
 TEST(TumSequence, MalformedListIsAnErrorAtConstruction) {
+  SP_REQUIRE_SHARED(kSeq / "associations.txt");
   const fs::path dir = damaged_copy();
   test::write_text(dir / "rgb.txt", "1.0 rgb/a.jpg\n0.5 rgb/b.jpg\n");
   try {

@@ -7,6 +7,7 @@
 #include <opencv2/imgproc.hpp>
 #include <random>
 
+#include "../support/shared_data.hpp"
 #include "stillpoint/common/error.hpp"
 #include "stillpoint/loop/vocabulary.hpp"
 
@@ -270,7 +271,7 @@ TEST(ShippedVocabulary, LoadsAndDescribesRealFrames) {
   EXPECT_GT(v.size(), 50000U);
   EXPECT_LE(v.size(), 100000U);
   const auto dir = std::filesystem::path(SP_SHARED_DIR) / "data/dynsynth/office_a_static_xyz_150/rgb";
-  if (!std::filesystem::is_directory(dir)) GTEST_SKIP() << "no shared data at " << dir;
+  SP_REQUIRE_SHARED(dir);
   std::vector<std::filesystem::path> frames;
   for (const auto& e : std::filesystem::directory_iterator(dir)) frames.push_back(e.path());
   std::sort(frames.begin(), frames.end());

@@ -6,6 +6,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "../support/shared_data.hpp"
 #include "stillpoint/common/error.hpp"
 #include "stillpoint/place/bow.hpp"
 #include "stillpoint/place/retrieval.hpp"
@@ -97,7 +98,7 @@ TEST(PlaceRetrieval, PlacesFolderSplitAndErrors) {
 
 TEST(PlaceRetrieval, RealSetsFollowTheirProtocols) {
   const fs::path vpr = fs::path(SP_SHARED_DIR) / "data" / "vpr";
-  if (!fs::exists(vpr / "corridor")) GTEST_SKIP() << "no shared VPR data";
+  SP_REQUIRE_SHARED(vpr / "nordland", vpr / "corridor");
   const auto nord = load_retrieval_set(vpr / "nordland");
   EXPECT_EQ(nord.queries.size(), nord.database.size());
   EXPECT_EQ(nord.ground_truth[10], (std::vector<int>{8, 9, 10, 11, 12}));
