@@ -18,7 +18,16 @@ DynamicConfig DynamicConfig::from_yaml(const ConfigReader& r) {
     c.detector = dyn::DetectorConfig::from_yaml(r.section("detector"));
     c.detector_configured = true;
   }
-  c.motion = dyn::MotionCheckConfig::from_yaml(r.section("motion"));
+  const ConfigReader motion = r.section("motion");
+  // The culling mode of the system is `dynamic.mode`; the motion check's own `mode` key (kept for
+  // library users of MotionCheckConfig) would be overwritten by it, so here it is refused, not ignored.
+  if (motion.has("mode")) {
+    motion.fail(
+        "mode",
+        "not used by the system: set the culling mode with dynamic.mode (auto | off | flow | detector | "
+        "detector+flow | oracle)");
+  }
+  c.motion = dyn::MotionCheckConfig::from_yaml(motion);
   return c;
 }
 
