@@ -7,6 +7,7 @@ PACKAGES=(
   libyaml-cpp-dev libspdlog-dev libfmt-dev libcli11-dev nlohmann-json3-dev
   libgtest-dev libgmock-dev libbenchmark-dev libopenni2-dev
   chromium nodejs  # report: headless-browser test; npm fetches three.js at build time
+  python3-opencv python3-numpy ccache  # scripts/room_suite.sh renders with dynsynth; ccache speeds rebuilds
   clang libclang-rt-14-dev  # sanitizer builds and libFuzzer targets (scripts/sanitize.sh, scripts/fuzz.sh)
   $(command -v npm >/dev/null || echo npm)  # NodeSource's nodejs ships npm and conflicts with Debian's
 )

@@ -65,6 +65,7 @@ struct RunArgs {
   std::string save_map;
   std::string load_map;
   bool dense_cloud = false;
+  std::vector<std::string> overrides;  // --set section.key=value
 };
 
 std::filesystem::path default_dataset() {
@@ -81,7 +82,7 @@ int run(const RunArgs& args) {
     spdlog::info("no --dataset given: running the bundled demo sequence {}", dataset.string());
   const std::filesystem::path config_file =
       args.config.empty() ? default_config() : std::filesystem::path(args.config);
-  pipeline::SystemConfig config = pipeline::SystemConfig::load(config_file);
+  pipeline::SystemConfig config = pipeline::SystemConfig::load(config_file, args.overrides);
   if (!args.dynamic.empty()) config.dynamic.mode = args.dynamic;
   if (!args.detector_model.empty()) config.dynamic.model = args.detector_model;
   if (!args.keyframe_policy.empty()) config.tracker.keyframes.policy = args.keyframe_policy;
@@ -118,6 +119,7 @@ int run(const RunArgs& args) {
   options.dense_cloud = args.dense_cloud;
   options.extra_stats["dataset"] = dataset.string();
   options.extra_stats["config"] = config_file.string();
+  if (!args.overrides.empty()) options.extra_stats["config_overrides"] = args.overrides;
   const auto result = pipeline::run_slam(*source, config, options);
 
   const auto& s = result.stats;
@@ -180,6 +182,8 @@ void add_run_command(CLI::App& app) {
   cmd->add_option("--save-map", args->save_map, "Save the map to this file at the end (docs/map_files.md)");
   cmd->add_option("--load-map", args->load_map,
                   "Relocalise in this saved map and extend it (instead of starting a new map)");
+  cmd->add_option("--set", args->overrides,
+                  "Override a configuration key, e.g. --set dynamic.detector_interval=1 (repeatable)");
   cmd->add_option("--keyframe-policy", args->keyframe_policy, "heuristic|adaptive")
       ->check(CLI::IsMember({"heuristic", "adaptive"}));
   cmd->callback([args] {

@@ -167,7 +167,9 @@ TEST(MotionCheck, MovingBoxCulledStaticBoxKeptBackgroundInBoxKept) {
   Detections det;
   det.frame_index = 1;
   det.items = {{patch_box, 0, 0.9f}, {board_box, 0, 0.8f}};
-  DynamicFeatureFilter f{MotionCheckConfig{}};
+  MotionCheckConfig cfg;
+  cfg.static_proof_frames = 0;  // one frame decides (the static-until-proven rule is tested below)
+  DynamicFeatureFilter f{cfg};
   const DynamicResult r = f.process(input(p, true, &det));
   ASSERT_EQ(r.box_dynamic.size(), 2u);
   EXPECT_TRUE(r.box_dynamic[0]);
@@ -239,6 +241,7 @@ TEST(MotionCheck, PausingPersonIsHeldDynamicThenReleased) {
   for (int hold : {10, 1}) {
     MotionCheckConfig cfg;
     cfg.dynamic_hold_frames = hold;
+    cfg.static_proof_frames = 0;  // the hold alone
     DynamicFeatureFilter f(cfg);
     std::vector<bool> dyn;
     for (std::size_t i = 1; i < frames.size(); ++i) {
@@ -255,6 +258,84 @@ TEST(MotionCheck, PausingPersonIsHeldDynamicThenReleased) {
     }
     EXPECT_TRUE(dyn[0]);
     EXPECT_EQ(dyn[2], hold == 10) << "hold " << hold;  // frame 3: two frames after the last motion
+  }
+}
+
+// A person standing still (the board, boxed as a person) next to a chair (boxed, class 56), static
+// camera: the person stays dynamic until the motion check has seen it still static_proof_frames
+// times in a row; the chair, not of a dynamic class, is static from the first check; kept keypoints
+// in the boxes are suspect for the pose guard.
+TEST(MotionCheck, StillPersonIsDynamicUntilProvenStatic) {
+  const Scene s;
+  const Rendered f = test::render(s.planes({0, 0}), Eigen::Isometry3d::Identity());
+  const auto kps = test::grid_keypoints(640, 480, 8);
+  const cv::Rect2f person = test::label_box(f.label, 1), chair = test::label_box(f.label, 2);
+  for (int proof : {0, 4}) {
+    MotionCheckConfig cfg;
+    cfg.static_proof_frames = proof;
+    DynamicFeatureFilter filter(cfg);
+    for (std::size_t i = 1; i <= 6; ++i) {
+      Detections det;
+      det.frame_index = i;
+      det.items = {{person, 0, 0.9f}, {chair, 56, 0.9f}};
+      DynamicInput in;
+      in.frame_index = i;
+      in.prev_gray = &f.gray;
+      in.gray = &f.gray;
+      in.depth = &f.depth;
+      in.K = test::test_K();
+      in.keypoints = &kps;
+      in.detections = &det;
+      const DynamicResult r = filter.process(in);
+      ASSERT_EQ(r.box_dynamic.size(), 2u);
+      EXPECT_EQ(r.box_dynamic[0], static_cast<int>(i) < proof) << "proof " << proof << " frame " << i;
+      EXPECT_FALSE(r.box_dynamic[1]) << "frame " << i;
+      int suspect_in_chair = 0, suspect_far = 0;
+      for (std::size_t k = 0; k < kps.size(); ++k) {
+        if (!r.keypoint_suspect[k]) continue;
+        EXPECT_FALSE(r.keypoint_dynamic[k]);
+        const cv::Point2f& p = kps[k].pt;
+        if (chair.contains(p)) ++suspect_in_chair;
+        const auto grown = [](const cv::Rect2f& b) {
+          return cv::Rect2f(b.x - 10, b.y - 10, b.width + 20, b.height + 20);
+        };
+        const bool near_box = grown(person).contains(p) || grown(chair).contains(p);
+        if (!near_box) ++suspect_far;
+      }
+      EXPECT_GT(suspect_in_chair, 50);
+      EXPECT_EQ(suspect_far, 0);
+    }
+  }
+}
+
+// A loose box round the moving patch takes in far more wall (1 m behind) than patch: counted over
+// all its points the box looks still; counted at the object's depth it moves.
+TEST(MotionCheck, LooseBoxVotesAtObjectDepth) {
+  Scene s;
+  s.with_board = false;
+  const Pair p = make_pair(s, 0.0, {0, 0, 0}, {0.05, 0});
+  const cv::Rect2f patch = test::label_box(p.cur.label, 2);
+  const float m = 140.f;
+  const cv::Rect2f loose(patch.x - m, patch.y - m, patch.width + 2 * m, patch.height + 2 * m);
+  Detections det;
+  det.frame_index = 1;
+  det.items = {{loose, 0, 0.9f}};
+  for (bool at_depth : {false, true}) {
+    MotionCheckConfig cfg;
+    cfg.static_proof_frames = 0;  // the vote alone decides
+    cfg.ratio_at_object_depth = at_depth;
+    const DynamicResult r = DynamicFeatureFilter(cfg).process(input(p, true, &det));
+    // The premise: few of the box's tracked points are on the patch.
+    int in_box = 0, on_patch = 0;
+    for (std::size_t i = 0; i < r.flow_points.size(); ++i) {
+      if (!loose.contains(r.flow_points[i])) continue;
+      ++in_box;
+      on_patch +=
+          p.cur.label.at<uchar>(cv::Point(cvRound(r.flow_points[i].x), cvRound(r.flow_points[i].y))) == 2;
+    }
+    ASSERT_LT(on_patch, cfg.moving_ratio_threshold * in_box);
+    ASSERT_EQ(r.box_dynamic.size(), 1u);
+    EXPECT_EQ(r.box_dynamic[0], at_depth);
   }
 }
 

@@ -32,11 +32,13 @@ std::string read_file(const std::filesystem::path& p) {
 }
 
 RunResult run(const std::string& sequence, const std::string& out_name, const std::string& dynamic_mode,
-              bool deterministic = true, const std::atomic<bool>* stop = nullptr) {
+              bool deterministic = true, const std::atomic<bool>* stop = nullptr,
+              const std::filesystem::path& detector_model = {}) {
   const auto dir = kData / sequence;
   io::TumSequence source(dir);
   SystemConfig config = SystemConfig::load(kConfig);
   config.dynamic.mode = dynamic_mode;
+  if (!detector_model.empty()) config.dynamic.model = detector_model.string();
   RunOptions options;
   options.out_dir = scratch(out_name);
   options.deterministic = deterministic;
@@ -74,6 +76,22 @@ TEST_F(EndToEnd, WalkingSequenceWithOracleCullingStaysAccurate) {
   // standing still, which stay (they are static), so recall against the masks is well below 1.
   EXPECT_GT(r.stats["culling_score"]["recall"].get<double>(), 0.5);
   EXPECT_GT(r.stats["culling_score"]["culled_keypoints"].get<int>(), 1000);
+}
+
+// The method as users run it: a real detector (YOLOX-nano, every 3rd frame, boxes carried by flow)
+// plus the motion check, static-until-proven people and the pose guard. Bound: the oracle test's.
+TEST_F(EndToEnd, WalkingSequenceWithDetectorAndFlowStaysAccurate) {
+  const auto model = std::filesystem::path(SP_SHARED_DIR) / "models" / "yolox_nano.onnx";
+  SP_REQUIRE_SHARED(model);
+  const RunResult r =
+      run("office_a_walking_xyz_150", "walking_detector_flow", "detector+flow", true, nullptr, model);
+  ASSERT_TRUE(r.completed);
+  EXPECT_EQ(r.stats["dynamic_mode"].get<std::string>(), "detector+flow");
+  EXPECT_EQ(r.stats["lost_frames"].get<int>(), 0);
+  ASSERT_TRUE(r.ate_rmse.has_value());
+  EXPECT_LT(*r.ate_rmse, 0.015);
+  EXPECT_GT(r.stats["stages_ms"]["detector"]["count"].get<int>(), 0);  // the detector really ran
+  EXPECT_GT(r.stats["culling_score"]["recall"].get<double>(), 0.5);
 }
 
 TEST_F(EndToEnd, DeterministicModeGivesIdenticalTrajectories) {

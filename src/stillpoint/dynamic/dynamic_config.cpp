@@ -49,6 +49,8 @@ MotionCheckConfig MotionCheckConfig::from_yaml(const ConfigReader& r) {
   r.read("min_points_to_decide", c.min_points_to_decide, 1, 1000);
   r.read("always_dynamic_classes", c.always_dynamic_classes);
   r.read("dynamic_hold_frames", c.dynamic_hold_frames, 0, 1000);
+  r.read("static_proof_frames", c.static_proof_frames, 0, 1000);
+  r.read("ratio_at_object_depth", c.ratio_at_object_depth);
   r.read("keep_background_in_box", c.keep_background_in_box);
   r.read("background_depth_margin_m", c.background_depth_margin_m, 0.05, 10.0);
   r.read("cull_unboxed_movers", c.cull_unboxed_movers);

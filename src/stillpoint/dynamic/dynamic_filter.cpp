@@ -149,7 +149,7 @@ DynamicFeatureFilter::DynamicFeatureFilter(const MotionCheckConfig& cfg,
 
 void DynamicFeatureFilter::reset() {
   history_.clear();
-  memory_.clear();
+  tracks_.clear();
   cached_gray_.release();
   cached_pyr_.clear();
 }
@@ -287,64 +287,96 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
   // 4. Which boxes move.
   res.box_dynamic.assign(res.boxes.size(), false);
   std::vector<float> object_depth(res.boxes.size(), 0.f);
+  const auto bg_margin = static_cast<float>(cfg_.background_depth_margin_m);
+  std::vector<bool> track_used(tracks_.size(), false);
   for (std::size_t b = 0; b < res.boxes.size(); ++b) {
     const Detection& det = res.boxes[b];
     const bool always = det.class_id >= 0 &&
                         static_cast<std::size_t>(det.class_id) < always_dynamic_.size() &&
                         always_dynamic_[static_cast<std::size_t>(det.class_id)];
-    int total = 0, mov = 0;
-    std::vector<float> z_moving, z_all;
+    std::vector<std::size_t> members;
+    std::vector<float> member_z, z_moving, z_all;
     for (std::size_t i = 0; i < n; ++i) {
       if (!inside(det.box, cur[i]) || res.flow_residual[i] < 0.f) continue;
-      ++total;
-      mov += moving[i] ? 1 : 0;
-      // Depth-edge points are left out: their depth may belong to the background.
+      // Depth-edge points are left out of the object depth: theirs may belong to the background.
       const float z = has_depth ? stable_depth(*in.depth, cur[i]) : 0.f;
+      members.push_back(i);
+      member_z.push_back(z);
       if (z > 0.f) (moving[i] ? z_moving : z_all).push_back(z);
     }
-    bool dyn = false;
-    bool decided_by_motion = false;
-    if (cfg_.mode == CullMode::kDetectorOnly || !do_flow) {
-      dyn = cfg_.mode == CullMode::kDetectorOnly || always;
-    } else if (total >= cfg_.min_points_to_decide) {
-      dyn = static_cast<double>(mov) >= cfg_.moving_ratio_threshold * static_cast<double>(total);
-      decided_by_motion = dyn;
-    } else {
-      dyn = always;
-      decided_by_motion = always;
-    }
-    // People pause mid-walk: a box that moved a moment ago keeps being dynamic for a while.
-    Memory* match = nullptr;
-    for (Memory& m : memory_) {
-      if (m.class_id == det.class_id && iou(m.box, det.box) > 0.3f &&
-          (!match || iou(m.box, det.box) > iou(match->box, det.box))) {
-        match = &m;
-      }
-    }
-    if (!dyn && match &&
-        in.frame_index - match->last_dynamic_frame <= static_cast<std::size_t>(cfg_.dynamic_hold_frames)) {
-      dyn = true;
-    }
-    if (decided_by_motion) {
-      if (match) {
-        match->last_dynamic_frame = in.frame_index;
-      } else {
-        memory_.push_back({det.box, det.class_id, in.frame_index});
-        match = &memory_.back();
-      }
-    }
-    if (match) match->box = det.box;
-    res.box_dynamic[b] = dyn;
     // Object depth: the movers' median, else a low quantile (the object is in front of its background).
     if (z_moving.size() >= 3) {
       object_depth[b] = median_of(z_moving);
     } else {
-      z_all.insert(z_all.end(), z_moving.begin(), z_moving.end());
-      object_depth[b] = z_all.size() >= 3 ? quantile_of(z_all, 0.3) : 0.f;
+      std::vector<float> z = z_all;
+      z.insert(z.end(), z_moving.begin(), z_moving.end());
+      object_depth[b] = z.size() >= 3 ? quantile_of(z, 0.3) : 0.f;
     }
+    // The vote: over the points at the object's depth when there are enough, else over all of them.
+    int total = 0, mov = 0;
+    if (cfg_.ratio_at_object_depth && object_depth[b] > 0.f) {
+      for (std::size_t m = 0; m < members.size(); ++m) {
+        if (member_z[m] <= 0.f || std::abs(member_z[m] - object_depth[b]) > bg_margin) continue;
+        ++total;
+        mov += moving[members[m]] ? 1 : 0;
+      }
+    }
+    if (total < cfg_.min_points_to_decide) {
+      total = static_cast<int>(members.size());
+      mov = 0;
+      for (std::size_t i : members) mov += moving[i] ? 1 : 0;
+    }
+    enum class Seen { kMoving, kStill, kUndecided } seen = Seen::kUndecided;
+    const bool judged = cfg_.mode != CullMode::kDetectorOnly && do_flow;
+    if (judged && total >= cfg_.min_points_to_decide) {
+      seen = static_cast<double>(mov) >= cfg_.moving_ratio_threshold * static_cast<double>(total)
+                 ? Seen::kMoving
+                 : Seen::kStill;
+    }
+    // The same object in earlier frames: the unused track of its class with the largest overlap.
+    std::size_t match = tracks_.size();
+    float best_iou = 0.3f;
+    for (std::size_t t = 0; t < tracks_.size(); ++t) {
+      const float o = iou(tracks_[t].box, det.box);
+      if (!track_used[t] && tracks_[t].class_id == det.class_id && o > best_iou) best_iou = o, match = t;
+    }
+    if (match == tracks_.size()) {
+      tracks_.push_back({det.box, det.class_id, in.frame_index, std::nullopt, 0});
+      track_used.push_back(false);
+    }
+    track_used[match] = true;
+    BoxTrack& track = tracks_[match];
+    track.box = det.box;
+    track.last_seen_frame = in.frame_index;
+    if (seen == Seen::kMoving) {
+      track.last_dynamic_frame = in.frame_index;
+      track.static_streak = 0;
+    } else if (seen == Seen::kStill) {
+      ++track.static_streak;
+    } else if (judged && always && cfg_.static_proof_frames == 0) {
+      // Too few points to judge: the class decides (the earlier rule), and counts as motion for the hold.
+      track.last_dynamic_frame = in.frame_index;
+    }
+    // People pause mid-walk: a box that moved a moment ago keeps being dynamic for a while.
+    const bool held = track.last_dynamic_frame && in.frame_index - *track.last_dynamic_frame <=
+                                                      static_cast<std::size_t>(cfg_.dynamic_hold_frames);
+    // Static until proven: an object of a dynamic class is dynamic until seen still long enough.
+    const bool unproven =
+        always && (cfg_.static_proof_frames == 0 ? seen == Seen::kUndecided
+                                                 : track.static_streak < cfg_.static_proof_frames);
+    bool dyn = false;
+    if (cfg_.mode == CullMode::kDetectorOnly) {
+      dyn = true;
+    } else if (!do_flow) {
+      dyn = always;
+    } else {
+      dyn = seen == Seen::kMoving || held || unproven;
+    }
+    res.box_dynamic[b] = dyn;
   }
-  std::erase_if(memory_, [&](const Memory& m) {
-    return in.frame_index > m.last_dynamic_frame + static_cast<std::size_t>(cfg_.dynamic_hold_frames);
+  std::erase_if(tracks_, [&](const BoxTrack& t) {
+    return in.frame_index > t.last_seen_frame + static_cast<std::size_t>(std::max(cfg_.dynamic_hold_frames,
+                                                                                  cfg_.max_history_frames));
   });
 
   // 5. Confirmed movers: moving points with enough moving neighbours (isolated ones are noise).
@@ -362,7 +394,8 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
   }
 
   // 6. Keypoints: inside a dynamic box (unless depth-separated from the object), or nearest to a mover.
-  const auto bg_margin = static_cast<float>(cfg_.background_depth_margin_m);
+  //    Kept keypoints in or near an object are marked suspect for the tracker's pose guard.
+  res.keypoint_suspect.assign(n_kp, false);
   const auto nearest_flow = [&](const cv::Point2f& p) {
     int nearest = -1;
     float best = std::numeric_limits<float>::max();
@@ -374,7 +407,10 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
   for (std::size_t k = 0; k < n_kp; ++k) {
     const cv::Point2f& p = (*in.keypoints)[k].pt;
     bool dyn = false;
+    bool near_object = false;
     for (std::size_t b = 0; b < res.boxes.size() && !dyn; ++b) {
+      if (!inside(grow(res.boxes[b].box, 2.f * margin), p)) continue;
+      near_object = true;
       if (!res.box_dynamic[b] || !inside(grow(res.boxes[b].box, margin), p)) continue;
       dyn = true;
       // Depth-separated points in the box (background behind, furniture in front) are kept.
@@ -384,11 +420,14 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
         if (z > 0.f) dyn = std::abs(z - object_depth[b]) <= bg_margin;
       }
     }
-    if (!dyn && cull_movers) {
+    if (!dyn && (cull_movers || do_flow)) {
       const int j = nearest_flow(p);
-      dyn = j >= 0 && confirmed[static_cast<std::size_t>(j)];
+      const bool mover_near = j >= 0 && moving[static_cast<std::size_t>(j)];
+      dyn = cull_movers && j >= 0 && confirmed[static_cast<std::size_t>(j)];
+      near_object = near_object || mover_near;
     }
     res.keypoint_dynamic[k] = dyn;
+    res.keypoint_suspect[k] = !dyn && near_object;
     res.culled += dyn ? 1 : 0;
   }
   res.ms = sw.elapsed_ms();

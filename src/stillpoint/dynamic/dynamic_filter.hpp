@@ -49,6 +49,13 @@ struct MotionCheckConfig {
   int min_points_to_decide = 5;         // fewer tracked points in a box: undecided [1, 1000]
   std::vector<std::string> always_dynamic_classes = {"person"};  // undecided boxes of these are dynamic
   int dynamic_hold_frames = 10;  // a box that moved stays dynamic this many frames (people pause) [0, 1000]
+  // Static until proven: a box of an always-dynamic class stays dynamic until the motion check has
+  // found it static in this many consecutive frames (a person is moving unless shown still). 0 = the
+  // box is static until seen moving (the paper's literal reading, docs/dynamic.md) [0, 1000].
+  int static_proof_frames = 8;
+  // The moving share of a box is counted over the points at the object's depth only, so background
+  // seen through a loose box does not outvote the person [true]; false = over all points in the box.
+  bool ratio_at_object_depth = true;
   // Keypoints in a dynamic box whose depth differs from the object's by more than the margin
   // (background behind it, furniture in front of it) are kept.
   bool keep_background_in_box = true;
@@ -76,7 +83,11 @@ struct DynamicInput {
 };
 
 struct DynamicResult {
-  std::vector<bool> keypoint_dynamic;    // per input keypoint
+  std::vector<bool> keypoint_dynamic;  // per input keypoint
+  // Per input keypoint: kept, but in or near a detected object (a box judged static, background in
+  // a dynamic box) or next to a moving flow point. The tracker's pose guard re-solves without these
+  // when the pose jumps against the motion model.
+  std::vector<bool> keypoint_suspect;
   std::vector<Detection> boxes;          // detections carried to the current frame
   std::vector<bool> box_dynamic;         // per box
   std::vector<cv::Point2f> flow_points;  // tracked points in the current frame
@@ -107,10 +118,12 @@ class DynamicFeatureFilter {
     std::size_t frame_index = 0;  // the "cur" frame of the step
     std::vector<cv::Point2f> prev, cur;
   };
-  struct Memory {  // a box that was dynamic recently
+  struct BoxTrack {  // one object followed over frames by box overlap
     cv::Rect2f box;
     int class_id = 0;
-    std::size_t last_dynamic_frame = 0;
+    std::size_t last_seen_frame = 0;
+    std::optional<std::size_t> last_dynamic_frame;  // last frame the motion check saw it move
+    int static_streak = 0;                          // consecutive frames the motion check saw it still
   };
 
   std::vector<Detection> carry_boxes(const Detections& d, std::size_t to_frame) const;
@@ -125,7 +138,7 @@ class DynamicFeatureFilter {
   MotionCheckConfig cfg_;
   std::vector<bool> always_dynamic_;  // class id -> always dynamic
   std::deque<FlowStep> history_;
-  std::vector<Memory> memory_;
+  std::vector<BoxTrack> tracks_;
   cv::Mat cached_gray_;  // last current image and its LK pyramid, reused as "previous"
   std::vector<cv::Mat> cached_pyr_;
 };

@@ -24,7 +24,7 @@ ExtractedFeatures FrontEnd::extract(const io::FrameData& data) {
 }
 
 track::Frame FrontEnd::assemble(const io::FrameData& data, ExtractedFeatures features,
-                                const std::vector<bool>& drop) const {
+                                const std::vector<bool>& drop, const std::vector<bool>& suspect) const {
   track::Frame frame;
   frame.index = data.index;
   frame.stamp = data.stamp;
@@ -39,6 +39,10 @@ track::Frame FrontEnd::assemble(const io::FrameData& data, ExtractedFeatures fea
     rows.push_back(static_cast<int>(i));
   }
   frame.culled = features.keypoints.size() - raw.size();
+  if (!suspect.empty()) {
+    frame.suspect.reserve(rows.size());
+    for (int r : rows) frame.suspect.push_back(static_cast<std::size_t>(r) < suspect.size() && suspect[r]);
+  }
   descriptors.create(static_cast<int>(rows.size()), 32, CV_8U);
   for (std::size_t r = 0; r < rows.size(); ++r) {
     features.descriptors.row(rows[r]).copyTo(descriptors.row(static_cast<int>(r)));

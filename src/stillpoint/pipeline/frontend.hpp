@@ -20,9 +20,10 @@ class FrontEnd {
   FrontEnd(const feat::OrbConfig& orb, const geo::CameraIntrinsics& camera, const track::DepthModel& depth);
 
   ExtractedFeatures extract(const io::FrameData& data);
-  // Builds the tracker's frame; features flagged in `drop` (dynamic) are removed.
-  track::Frame assemble(const io::FrameData& data, ExtractedFeatures features,
-                        const std::vector<bool>& drop) const;
+  // Builds the tracker's frame; features flagged in `drop` (dynamic) are removed, those flagged in
+  // `suspect` (kept, but near a detected object) are marked for the tracker's pose guard.
+  track::Frame assemble(const io::FrameData& data, ExtractedFeatures features, const std::vector<bool>& drop,
+                        const std::vector<bool>& suspect = {}) const;
   [[nodiscard]] map::ScalePyramid pyramid() const;
 
  private:

@@ -245,7 +245,7 @@ FrameReport SlamSystem::process(const io::FrameData& data) {
   Stopwatch watch;
   ExtractedFeatures features = frontend_.extract(data);
   times_.add("extract", watch.elapsed_ms());
-  std::vector<bool> dynamic;
+  std::vector<bool> dynamic, suspect;
   CullingOutput culled;
   if (culling_.enabled()) {
     watch.restart();
@@ -253,10 +253,11 @@ FrameReport SlamSystem::process(const io::FrameData& data) {
     times_.add("dynamic", watch.elapsed_ms());
     if (culled.detection_used && culled.detector_ms > 0) times_.add("detector", culled.detector_ms);
     dynamic = std::move(culled.drop);
+    suspect = std::move(culled.suspect);
   }
   artifacts_.on_frame(data, features.keypoints, dynamic, culled.result.boxes, culled.result.box_dynamic);
   if (culling_score_) culling_score_->add(data.rgb_path, features.keypoints, dynamic);
-  track::Frame frame = frontend_.assemble(data, std::move(features), dynamic);
+  track::Frame frame = frontend_.assemble(data, std::move(features), dynamic, suspect);
   culled_total_ += frame.culled;
 
   watch.restart();
@@ -315,6 +316,9 @@ nlohmann::json SlamSystem::statistics() {
   j["tracked_frames"] = tracker_.trajectory().size();
   j["lost_frames"] = tracker_.lost_frames();
   j["relocalizations"] = tracker_.relocalizations();
+  j["pose_guard"] = {{"jumps", tracker_.guard_stats().jumps},
+                     {"resolved", tracker_.guard_stats().resolved},
+                     {"keyframes_vetoed", tracker_.guard_stats().keyframes_vetoed}};
   j["keyframes_created"] = keyframes_created_;
   j["keyframe_policy"] = tracker_.policy().name();
   j["dynamic_mode"] = culling_.mode();

@@ -31,6 +31,46 @@ SystemConfig SystemConfig::from_yaml(const ConfigReader& r) {
   return c;
 }
 
+SystemConfig SystemConfig::load(const std::filesystem::path& file,
+                                const std::vector<std::string>& overrides) {
+  if (overrides.empty()) return load(file);
+  (void)ConfigReader::from_file(file);  // syntax errors in the file itself name its lines
+  YAML::Node root = YAML::LoadFile(file.string());
+  for (const std::string& o : overrides) {
+    const auto eq = o.find('=');
+    if (eq == std::string::npos || eq == 0) throw ConfigError("--set", 0, o, "expected section.key=value");
+    const std::string path = o.substr(0, eq);
+    YAML::Node value;
+    try {
+      value = YAML::Load(o.substr(eq + 1));
+    } catch (const YAML::Exception& e) {
+      throw ConfigError("--set", 0, path, std::string("value is not YAML: ") + e.what());
+    }
+    // Walk the dotted path, creating sections as needed (unknown keys are still caught below).
+    std::vector<YAML::Node> chain{root};
+    std::size_t start = 0;
+    while (true) {
+      const auto dot = path.find('.', start);
+      const std::string key = path.substr(start, dot == std::string::npos ? std::string::npos : dot - start);
+      if (key.empty()) throw ConfigError("--set", 0, path, "empty key in the dotted path");
+      if (dot == std::string::npos) {
+        chain.back()[key] = value;
+        break;
+      }
+      YAML::Node next = chain.back()[key];
+      if (!next.IsDefined() || next.IsNull()) chain.back()[key] = YAML::Node(YAML::NodeType::Map);
+      chain.push_back(chain.back()[key]);
+      start = dot + 1;
+    }
+  }
+  YAML::Emitter out;
+  out << root;
+  const ConfigReader r = ConfigReader::from_string(out.c_str(), file.string() + " with --set");
+  SystemConfig c = from_yaml(r);
+  r.finish();
+  return c;
+}
+
 SystemConfig SystemConfig::load(const std::filesystem::path& file) {
   const ConfigReader r = ConfigReader::from_file(file);
   SystemConfig c = from_yaml(r);

@@ -3,6 +3,7 @@
 // validated on load (unknown keys, missing keys and out-of-range values name the file and line).
 #include <filesystem>
 #include <string>
+#include <vector>
 
 #include "stillpoint/common/config_reader.hpp"
 #include "stillpoint/features/orb_extractor.hpp"
@@ -32,6 +33,9 @@ struct SystemConfig {
   static SystemConfig from_yaml(const ConfigReader& r);
   // Loads and validates a file; every key must be known.
   static SystemConfig load(const std::filesystem::path& file);
+  // The same with overrides "section.key=value" (the CLI's --set) applied to the file's YAML first;
+  // a value is YAML ("0.5", "true", "[person, dog]"). Malformed overrides are ConfigErrors.
+  static SystemConfig load(const std::filesystem::path& file, const std::vector<std::string>& overrides);
 };
 
 track::DepthModel depth_model_from_yaml(const ConfigReader& r);

@@ -24,6 +24,9 @@ struct Frame {
   feat::FeatureGrid grid;
   std::vector<map::PointId> points;  // per feature
   std::vector<bool> outlier;         // per feature, set by pose optimisation
+  // Per feature: kept by dynamic culling but in or near a detected object or a moving flow point
+  // (empty = none). The pose guard re-solves without them when the pose jumps.
+  std::vector<bool> suspect;
   geo::SE3 T_cw;
   bool has_pose = false;
   map::KeyframeId reference = map::kNoKeyframe;

@@ -26,6 +26,7 @@ TrackerConfig TrackerConfig::from_yaml(const ConfigReader& r) {
   r.read("relocalization_candidates", c.relocalization_candidates, std::size_t{1}, std::size_t{1000});
   c.pose = opt::PoseOptimizerConfig::from_yaml(r.section("pose_optimizer"));
   c.keyframes = KeyframePolicyConfig::from_yaml(r.section("keyframes"));
+  c.guard = PoseGuardConfig::from_yaml(r.section("pose_guard"));
   return c;
 }
 
@@ -50,7 +51,8 @@ Tracker::Tracker(map::Map& map, TrackerConfig config, geo::CameraIntrinsics came
       pyramid_(std::move(pyramid)),
       fps_(fps),
       policy_(make_keyframe_policy(config_.keyframes)),
-      camera_model_{camera.fx, camera.fy, camera.cx, camera.cy, depth.bf} {}
+      camera_model_{camera.fx, camera.fy, camera.cx, camera.cy, depth.bf},
+      guard_(config_.guard) {}
 
 void Tracker::start_in_existing_map() {
   // Lost, not NotInitialized: the next frames go through relocalize() and never create a map at
@@ -74,6 +76,9 @@ TrackOutcome Tracker::track(Frame& frame, const MappingStatus& mapping) {
   } else {
     refresh_last_frame(view);
     bool ok = false;
+    std::optional<geo::SE3> predicted;
+    if (state_ == TrackingState::Ok && velocity_ && last_frame_.has_pose)
+      predicted = *velocity_ * last_frame_.T_cw;
     if (state_ == TrackingState::Ok) {
       if (velocity_) ok = track_motion_model(view, frame);
       if (!ok) ok = track_reference_keyframe(view, frame);
@@ -82,10 +87,17 @@ TrackOutcome Tracker::track(Frame& frame, const MappingStatus& mapping) {
       out.relocalized = ok;
     }
     if (ok) ok = track_local_map(view, frame);
+    const bool jumped = ok && predicted && guard_pose(view, frame, *predicted);
     if (ok) {
       if (last_frame_.has_pose) velocity_ = frame.T_cw * last_frame_.T_cw.inverse();
       state_ = TrackingState::Ok;
-      if (need_keyframe(view, frame, mapping)) out.new_keyframe = create_keyframe(view, frame);
+      if (need_keyframe(view, frame, mapping)) {
+        if (jumped) {
+          ++guard_stats_.keyframes_vetoed;
+        } else {
+          out.new_keyframe = create_keyframe(view, frame);
+        }
+      }
     } else {
       state_ = TrackingState::Lost;
       velocity_.reset();
@@ -273,6 +285,42 @@ bool Tracker::track_local_map(map::MapView& view, Frame& frame) {
   const int needed =
       recently_relocalized && relocalizations_ > 0 ? config_.min_inliers_after_reloc : config_.min_inliers;
   return inliers >= needed;
+}
+
+bool Tracker::guard_pose(map::MapView& view, Frame& frame, const geo::SE3& predicted_T_cw) {
+  if (frame.suspect.size() != frame.points.size()) return false;
+  const PoseDeviation before = pose_deviation(frame.T_cw, predicted_T_cw);
+  if (!guard_.is_jump(before)) return false;
+  int inliers = 0, suspect = 0;
+  for (std::size_t i = 0; i < frame.points.size(); ++i) {
+    if (frame.points[i] == map::kNoPoint || frame.outlier[i]) continue;
+    ++inliers;
+    suspect += frame.suspect[i] ? 1 : 0;
+  }
+  if (!guard_.blames_suspects(inliers, suspect)) return false;
+  ++guard_stats_.jumps;
+  const geo::SE3 solved = frame.T_cw;
+  const std::vector<map::PointId> points = frame.points;
+  const std::vector<bool> outlier = frame.outlier;
+  for (std::size_t i = 0; i < frame.points.size(); ++i) {
+    if (frame.suspect[i]) frame.points[i] = map::kNoPoint;
+  }
+  frame.T_cw = predicted_T_cw;
+  const int kept = optimize_pose(view, frame);
+  const PoseDeviation after = pose_deviation(frame.T_cw, predicted_T_cw);
+  if (guard_.accepts_resolve(before, after, kept, config_.min_inliers)) {
+    ++guard_stats_.resolved;
+    spdlog::debug(
+        "pose guard: frame {} jumped {:.1f} cm / {:.2f} deg with {} of {} inliers near objects; "
+        "re-solved without them: {:.1f} cm / {:.2f} deg",
+        frame.index, before.translation_m * 100, before.rotation_deg, suspect, inliers,
+        after.translation_m * 100, after.rotation_deg);
+  } else {
+    frame.T_cw = solved;
+    frame.points = points;
+    frame.outlier = outlier;
+  }
+  return true;
 }
 
 bool Tracker::relocalize(map::MapView& view, Frame& frame) {

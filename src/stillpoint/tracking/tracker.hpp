@@ -11,6 +11,7 @@
 #include "stillpoint/optimize/pose_optimizer.hpp"
 #include "stillpoint/tracking/frame.hpp"
 #include "stillpoint/tracking/keyframe_policy.hpp"
+#include "stillpoint/tracking/pose_guard.hpp"
 #include "stillpoint/tracking/trajectory_recorder.hpp"
 
 namespace sp::track {
@@ -27,6 +28,7 @@ struct TrackerConfig {
   std::size_t relocalization_candidates = 20;
   opt::PoseOptimizerConfig pose;
   KeyframePolicyConfig keyframes;
+  PoseGuardConfig guard;
   static TrackerConfig from_yaml(const ConfigReader& r);
 };
 
@@ -68,6 +70,7 @@ class Tracker {
   [[nodiscard]] TrackingState state() const { return state_; }
   [[nodiscard]] std::size_t lost_frames() const { return lost_frames_; }
   [[nodiscard]] std::size_t relocalizations() const { return relocalizations_; }
+  [[nodiscard]] const PoseGuardStats& guard_stats() const { return guard_stats_; }
   [[nodiscard]] const TrajectoryRecorder& trajectory() const { return trajectory_; }
   [[nodiscard]] const KeyframePolicy& policy() const { return *policy_; }
   // Camera motion from the previous frame to the next one by the constant-velocity model (T_cur_prev).
@@ -79,6 +82,8 @@ class Tracker {
   bool track_reference_keyframe(map::MapView& view, Frame& frame);
   bool relocalize(map::MapView& view, Frame& frame);
   bool track_local_map(map::MapView& view, Frame& frame);
+  // The pose guard (PoseGuardConfig). True when the frame jumped: it must not become a keyframe.
+  bool guard_pose(map::MapView& view, Frame& frame, const geo::SE3& predicted_T_cw);
   int optimize_pose(map::MapView& view, Frame& frame);
   void update_local_map(map::MapView& view, Frame& frame);
   void refresh_last_frame(map::MapView& view);
@@ -109,6 +114,8 @@ class Tracker {
   RelocalizationCandidates reloc_candidates_;
   std::optional<std::size_t> first_reloc_frame_;
   TrajectoryRecorder trajectory_;
+  PoseGuardRules guard_;
+  PoseGuardStats guard_stats_;
 };
 
 }  // namespace sp::track

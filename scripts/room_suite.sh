@@ -1,0 +1,63 @@
+#!/usr/bin/env bash
+# Renders the room suite: random dynsynth rooms x camera/people motions, for tuning and for held-back
+# evaluation. Tune on the "tune" seeds only; the "heldout" seeds are for reporting (never tune on them).
+#
+#   scripts/room_suite.sh [--set tune|heldout|all] [--frames N] [--out DIR] [--workers N] [--motions "m1 m2"]
+#
+# Layout: OUT/<set>/room<seed>_<motion>/ (TUM layout with masks/ and boxes.txt). Existing complete
+# sequences are skipped, so the script can be re-run to finish an interrupted render.
+set -euo pipefail
+root="$(cd "$(dirname "$0")/.." && pwd)"
+dynsynth="${DYNSYNTH_TOOL:-$root/../shared/tools/dynsynth/dynsynth.py}"
+out="${ROOM_SUITE:-$HOME/room_suite}"
+set_name="all"
+frames=400
+workers=1
+motions="walking_static walking_xyz walking_rpy walking_halfsphere sitting_static"
+# Fixed split: the seeds never change, so "held-back" means the same rooms for everyone.
+tune_seeds="101 102 103 104"
+heldout_seeds="201 202 203 204"
+while (($#)); do
+  case "$1" in
+    --set) set_name="$2"; shift 2 ;;
+    --frames) frames="$2"; shift 2 ;;
+    --out) out="$2"; shift 2 ;;
+    --workers) workers="$2"; shift 2 ;;
+    --motions) motions="$2"; shift 2 ;;
+    --tune-seeds) tune_seeds="$2"; shift 2 ;;
+    --heldout-seeds) heldout_seeds="$2"; shift 2 ;;
+    -h|--help) sed -n 2,9p "$0"; exit 0 ;;
+    *) echo "room_suite.sh: unknown argument '$1' (see --help)" >&2; exit 2 ;;
+  esac
+done
+case "$set_name" in
+  tune) sets="tune" ;;
+  heldout) sets="heldout" ;;
+  all) sets="tune heldout" ;;
+  *) echo "room_suite.sh: --set must be tune, heldout or all" >&2; exit 2 ;;
+esac
+mkdir -p "$out"
+python=/usr/bin/python3  # Debian's, with python3-numpy and python3-opencv
+"$python" -c 'import cv2, numpy' 2>/dev/null || {
+  echo "room_suite.sh: needs Debian's python3-opencv and python3-numpy (scripts/setup.sh installs them)" >&2
+  exit 1
+}
+for s in $sets; do
+  seeds="$tune_seeds"
+  [ "$s" = heldout ] && seeds="$heldout_seeds"
+  for seed in $seeds; do
+    for motion in $motions; do
+      dir="$out/$s/room${seed}_${motion}"
+      if [ -f "$dir/meta/info.json" ] && [ "$(grep -vc '^#' "$dir/rgb.txt" 2>/dev/null || echo 0)" -ge "$frames" ]; then
+        echo "room_suite: $dir exists, skipped"
+        continue
+      fi
+      echo "room_suite: rendering $dir ($frames frames)"
+      rm -rf "$dir"
+      "$python" "$dynsynth" render --scene random --scene-seed "$seed" --motion "$motion" --frames "$frames" \
+        --seed "$seed" --rgb-format jpg --workers "$workers" --out "$dir" >"$out/.render_${s}_${seed}_${motion}.log" 2>&1 \
+        || { echo "room_suite: render failed, see $out/.render_${s}_${seed}_${motion}.log" >&2; exit 1; }
+    done
+  done
+done
+echo "room_suite: done ($out)"
