@@ -4,6 +4,7 @@
 
 #include "stillpoint/common/error.hpp"
 #include "stillpoint/loop/keyframe_sequences.hpp"
+#include "stillpoint/loop/loop_closer.hpp"
 
 namespace sp::loop {
 namespace {
@@ -43,8 +44,81 @@ TEST(RotationAngle, MatchesAxisAngle) {
   EXPECT_NEAR(rotation_angle(Eigen::Matrix3d::Identity(), yaw(M_PI)), M_PI, 1e-6);
 }
 
-TEST(SequenceSegmenter, AnglesJustBelowAndAboveThreshold) {
-  SequenceParams p;  // θ_T = 0.1, L_T = 15
+SequenceParams level() {
+  SequenceParams p;
+  p.trigger = "level";
+  return p;
+}
+
+// The paper's rules (§III-B prose), default trigger "rising-edge". θ1 = the previous step, θ2 = the step
+// to the new keyframe, θ_T = 0.1, L_T = 15.
+
+TEST(SequenceSegmenterPaper, SustainedTurnIsOneSequence) {
+  const SequenceParams p;
+  EXPECT_EQ(p.trigger, "rising-edge");
+  // Seven 0.5 rad steps: θ1 > θ_T and θ2 > θ_T every time, no edge: one sequence of 8 keyframes.
+  EXPECT_EQ(segment(std::vector<double>(7, 0.5), p), (std::vector<std::size_t>{8}));
+  // Still, then a sustained turn: the turn's first keyframe starts a sequence and the whole turn stays in it.
+  EXPECT_EQ(segment({0.01, 0.01, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5}, p), (std::vector<std::size_t>{3, 6}));
+}
+
+TEST(SequenceSegmenterPaper, RisingEdgeStartsANewSequenceFallingEdgeDoesNot) {
+  const SequenceParams p;
+  // θ1 = 0.01 < θ_T, θ2 = 0.5 > θ_T at keyframe 3: {0,1,2} closes, 3 starts the next; the turn ends at
+  // keyframe 4 (θ1 = 0.5 > θ_T, θ2 = 0.01 < θ_T): it joins.
+  SequenceSegmenter seg(p);
+  double a = 0.0;
+  KeyframeId id = 0;
+  std::vector<std::vector<KeyframeId>> closed;
+  for (double st : {0.0, 0.01, 0.01, 0.5, 0.01, 0.01}) {
+    a += st;
+    if (auto s = seg.add(id, yaw(a), one_word(static_cast<WordId>(id)))) closed.push_back(s->keyframes);
+    ++id;
+  }
+  ASSERT_EQ(closed.size(), 1U);
+  EXPECT_EQ(closed[0], (std::vector<KeyframeId>{0, 1, 2}));
+  EXPECT_EQ(seg.open_keyframes(), (std::vector<KeyframeId>{3, 4, 5}));
+  // A turn from the start, then still: the falling edge never starts a sequence.
+  EXPECT_EQ(segment({0.5, 0.5, 0.01, 0.01}, p), (std::vector<std::size_t>{5}));
+  // Two turns: a sequence per rising edge.
+  EXPECT_EQ(segment({0.01, 0.5, 0.5, 0.01, 0.01, 0.3, 0.01}, p), (std::vector<std::size_t>{2, 4, 2}));
+  // Just below / just above θ_T.
+  EXPECT_EQ(segment({0.0999, 0.0999, 0.1001, 0.0999, 0.1001}, p), (std::vector<std::size_t>{3, 2, 1}));
+  // Slow drift never closes on the angle between consecutive keyframes...
+  EXPECT_EQ(segment(std::vector<double>(9, 0.05), p), (std::vector<std::size_t>{10}));
+  // ...but does when measured against the sequence's first keyframe (θ crosses θ_T once per sequence).
+  SequenceParams first = p;
+  first.angle_to_first = true;
+  EXPECT_EQ(segment(std::vector<double>(9, 0.06), first), (std::vector<std::size_t>{2, 2, 2, 2, 2}));
+}
+
+TEST(SequenceSegmenterPaper, LengthAboveLTAlwaysCloses) {
+  const SequenceParams p;
+  // No edge at all (still, or a sustained turn): sequences are cut at L_T = 15 keyframes.
+  EXPECT_EQ(segment(std::vector<double>(39, 0.01), p), (std::vector<std::size_t>{15, 15, 10}));
+  EXPECT_EQ(segment(std::vector<double>(20, 0.5), p), (std::vector<std::size_t>{15, 6}));
+  SequenceParams four = p;
+  four.max_length = 4;
+  EXPECT_EQ(segment(std::vector<double>(9, 0.0), four), (std::vector<std::size_t>{4, 4, 2}));
+}
+
+TEST(SequenceSegmenterPaper, LengthBelowTwoNeverCloses) {
+  SequenceParams p;
+  p.max_length = 3;
+  // Keyframe 3 starts a sequence (L_T cap); keyframe 4 is a rising edge (θ1 = 0.01, θ2 = 0.5) but the
+  // open sequence holds one keyframe (L_S = 1 < 2): it joins.
+  EXPECT_EQ(segment({0.01, 0.01, 0.01, 0.5}, p), (std::vector<std::size_t>{3, 2}));
+  // The second keyframe of a run always joins the first (no θ1 yet, and L_S = 1).
+  EXPECT_EQ(segment({0.5}, SequenceParams{}), (std::vector<std::size_t>{2}));
+  // Without the rule (short_sequences_grow off) the rising edge closes the one-keyframe sequence.
+  p.short_sequences_grow = false;
+  EXPECT_EQ(segment({0.01, 0.01, 0.01, 0.5}, p), (std::vector<std::size_t>{3, 1, 1}));
+}
+
+// Our first reading, "level": every step >= θ_T closes (loop_closing.sequence_trigger: level).
+
+TEST(SequenceSegmenterLevel, AnglesJustBelowAndAboveThreshold) {
+  SequenceParams p = level();
   // 0.0999 joins, 0.1001 closes: {0,1,2} {3,4} {5}
   EXPECT_EQ(segment({0.0999, 0.0999, 0.1001, 0.0999, 0.1001}, p), (std::vector<std::size_t>{3, 2, 1}));
   // Slow drift never closes on the angle when measured between consecutive keyframes...
@@ -54,8 +128,8 @@ TEST(SequenceSegmenter, AnglesJustBelowAndAboveThreshold) {
   EXPECT_EQ(segment(std::vector<double>(9, 0.05), p), (std::vector<std::size_t>{2, 2, 2, 2, 2}));
 }
 
-TEST(SequenceSegmenter, LengthCapAndIds) {
-  SequenceParams p;
+TEST(SequenceSegmenterLevel, LengthCapAndIds) {
+  SequenceParams p = level();
   EXPECT_EQ(segment(std::vector<double>(39, 0.01), p), (std::vector<std::size_t>{15, 15, 10}));
   p.max_length = 4;
   EXPECT_EQ(segment(std::vector<double>(9, 0.0), p), (std::vector<std::size_t>{4, 4, 2}));
@@ -70,9 +144,9 @@ TEST(SequenceSegmenter, LengthCapAndIds) {
   EXPECT_EQ(seg.open_keyframes(), (std::vector<KeyframeId>{8}));
 }
 
-TEST(SequenceSegmenter, ShortSequencesTakeTheNextKeyframeWhateverTheTurn) {
-  SequenceParams p;  // short_sequences_grow by default, min_length 2
-  // Fast turns everywhere: pairs instead of singletons.
+TEST(SequenceSegmenterLevel, ShortSequencesTakeTheNextKeyframeWhateverTheTurn) {
+  SequenceParams p = level();  // short_sequences_grow by default, min_length 2
+  // Fast turns everywhere: pairs instead of singletons (the paper's rule gives one sequence, above).
   EXPECT_EQ(segment(std::vector<double>(7, 0.5), p), (std::vector<std::size_t>{2, 2, 2, 2}));
   // A fast turn between two slow stretches: the keyframe after the turn still starts a sequence.
   EXPECT_EQ(segment({0.01, 0.01, 0.5, 0.01, 0.01}, p), (std::vector<std::size_t>{3, 3}));
@@ -109,6 +183,29 @@ TEST(SequenceParams, RejectsBadValues) {
   EXPECT_EQ(q.max_length, 10);
   EXPECT_EQ(q.min_length, 3);
   EXPECT_THROW(SequenceParams::from_yaml(sp::ConfigReader::from_string("max_length: 0\n", "bad.yaml")),
+               sp::ConfigError);
+  EXPECT_EQ(q.trigger, "rising-edge");
+  EXPECT_EQ(SequenceParams::from_yaml(sp::ConfigReader::from_string("trigger: level\n", "t.yaml")).trigger,
+            "level");
+  EXPECT_THROW(SequenceParams::from_yaml(sp::ConfigReader::from_string("trigger: edge\n", "bad.yaml")),
+               sp::ConfigError);
+  p = SequenceParams{};
+  p.trigger = "falling";
+  EXPECT_THROW(p.validate(), sp::Error);
+}
+
+TEST(SequenceParams, SystemKeySequenceTrigger) {
+  const auto read = [](const std::string& text) {
+    const auto r = sp::ConfigReader::from_string(text, "loop.yaml");
+    const LoopClosingConfig c = LoopClosingConfig::from_yaml(r);
+    r.finish();
+    return c.detection.sequence.trigger;
+  };
+  EXPECT_EQ(read("detector: bow-sequence\n"), "rising-edge");
+  EXPECT_EQ(read("sequence_trigger: level\n"), "level");
+  EXPECT_EQ(read("sequence_trigger: rising-edge\n"), "rising-edge");
+  EXPECT_THROW(read("sequence_trigger: both\n"), sp::ConfigError);
+  EXPECT_THROW(read("sequence_trigger: level\ndetection:\n  sequence:\n    trigger: level\n"),
                sp::ConfigError);
 }
 

@@ -65,8 +65,8 @@ TEST(LoopDetectors, SequencesQueryTheDatabaseFarLess) {
 }
 
 TEST(LoopDetectors, ShortSequencesNeverCloseALoop) {
-  // Every keyframe turns by more than θ_T and short sequences close at once (the strict reading): all
-  // sequences have one keyframe, so nothing is queried.
+  // Every keyframe turns by more than θ_T and, read as a level trigger, short sequences close at once
+  // (the strict reading): all sequences have one keyframe, so nothing is queried.
   auto stream = make_stream(path_with_revisit(), 8, 14);
   for (std::size_t i = 0; i < stream.keyframes.size(); ++i) {
     stream.keyframes[i].R_cw =
@@ -74,13 +74,19 @@ TEST(LoopDetectors, ShortSequencesNeverCloseALoop) {
   }
   LoopDetectorParams strict;
   strict.sequence.short_sequences_grow = false;
+  strict.sequence.trigger = "level";
   auto det = make_loop_detector("bow-sequence", strict);
   const auto r = run(*det, stream);
   EXPECT_TRUE(r.candidates.empty());
   EXPECT_EQ(r.stats.queries, 0U);
   // Read literally ("shorter sequences never close"), the same turns give pairs that are queried.
-  auto grow = make_loop_detector("bow-sequence", LoopDetectorParams{});
+  LoopDetectorParams grow_level;
+  grow_level.sequence.trigger = "level";
+  auto grow = make_loop_detector("bow-sequence", grow_level);
   EXPECT_GT(run(*grow, stream).stats.queries, 0U);
+  // The paper's rising-edge rule: a steady turn has no edge, sequences are cut at L_T and queried.
+  auto paper = make_loop_detector("bow-sequence", LoopDetectorParams{});
+  EXPECT_GT(run(*paper, stream).stats.queries, 0U);
 }
 
 TEST(GroupConsistency, NeedsConsecutiveOverlappingGroups) {

@@ -16,6 +16,7 @@ namespace sp::loop {
 SequenceParams SequenceParams::from_yaml(const sp::ConfigReader& r) {
   SequenceParams p;
   r.read("theta_t", p.theta_t, 1e-6, M_PI);
+  r.read_choice("trigger", p.trigger, {"rising-edge", "level"});
   r.read("max_length", p.max_length, 1, 1000);
   r.read("min_length", p.min_length, 1, 1000);
   r.read("angle_to_first", p.angle_to_first);
@@ -29,6 +30,8 @@ SequenceParams SequenceParams::from_yaml(const sp::ConfigReader& r) {
 
 void SequenceParams::validate() const {
   if (!(theta_t > 0.0 && theta_t <= M_PI)) throw sp::Error("keyframe sequences: theta_t must be in (0, pi]");
+  if (trigger != "rising-edge" && trigger != "level")
+    throw sp::Error("keyframe sequences: trigger must be rising-edge or level, not '" + trigger + "'");
   if (max_length < 1 || max_length > 1000)
     throw sp::Error("keyframe sequences: max_length must be in [1, 1000]");
   if (min_length < 1 || min_length > max_length) {
@@ -65,18 +68,32 @@ KeyframeSequence SequenceSegmenter::close() {
 std::optional<KeyframeSequence> SequenceSegmenter::add(KeyframeId id, const Eigen::Matrix3d& R_cw,
                                                        std::shared_ptr<const BowVector> bow) {
   std::optional<KeyframeSequence> closed;
+  std::optional<double> consecutive;  // the step from the previous keyframe to this one
   if (!ids_.empty()) {
-    const double theta = rotation_angle(params_.angle_to_first ? first_R_ : last_R_, R_cw);
-    const bool too_short =
-        params_.short_sequences_grow && ids_.size() < static_cast<std::size_t>(params_.min_length);
-    const bool joins =
-        (theta < params_.theta_t || too_short) && ids_.size() < static_cast<std::size_t>(params_.max_length);
-    if (!joins) closed = close();
+    const std::size_t length = ids_.size();  // L_S before this keyframe joins
+    consecutive = rotation_angle(last_R_, R_cw);
+    const double theta2 = params_.angle_to_first ? rotation_angle(first_R_, R_cw) : *consecutive;
+    bool close_now = false;
+    if (params_.trigger == "level") {
+      close_now = theta2 >= params_.theta_t;
+    } else {
+      // θ1, measured the same way as θ2: the step that brought the previous keyframe (whatever sequence
+      // it joined), or that keyframe's angle to the sequence's first one (0 when it is the first).
+      const std::optional<double> theta1 =
+          params_.angle_to_first ? std::optional<double>(rotation_angle(first_R_, last_R_)) : last_step_;
+      close_now = theta1.has_value() && *theta1 < params_.theta_t && theta2 > params_.theta_t;
+    }
+    // L_S < min_length never closes; a sequence that would exceed L_T keyframes always closes.
+    if (params_.short_sequences_grow && length < static_cast<std::size_t>(params_.min_length))
+      close_now = false;
+    if (length >= static_cast<std::size_t>(params_.max_length)) close_now = true;
+    if (close_now) closed = close();
   }
   if (ids_.empty()) first_R_ = R_cw;
   ids_.push_back(id);
   bows_.push_back(std::move(bow));
   last_R_ = R_cw;
+  last_step_ = consecutive;
   return closed;
 }
 

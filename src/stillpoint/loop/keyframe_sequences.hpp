@@ -6,9 +6,13 @@
 // Our reading (docs/loop_sequences.md has the reasoning):
 //  * θ between keyframes a and b: R = R_cw_b · R_cw_a^T, θ = arccos((tr R − 1) / 2) (Eqs. 6–9), taken
 //    between consecutive keyframes (option: against the sequence's first keyframe).
-//  * A keyframe joins the current sequence while θ < θ_T and the sequence holds fewer than L_T
-//    keyframes; otherwise the current sequence closes and the keyframe starts a new one. So a
-//    sequence has 1..L_T keyframes.
+//  * trigger "rising-edge" (default, the paper's prose): with θ1 the previous step and θ2 the step to
+//    the new keyframe, the current sequence closes and the new keyframe starts the next one only when
+//    θ1 < θ_T and θ2 > θ_T (a turn starts); a sustained turn, a turn that ends (θ1 > θ_T, θ2 < θ_T)
+//    and every other case keep adding to the current sequence.
+//    trigger "level" (our first reading): every step with θ >= θ_T closes the sequence.
+//  * In both: a sequence holding fewer than min_length (2) keyframes never closes (L_S < 2), and one
+//    that would exceed L_T (15) keyframes always closes. So a sequence has 1..L_T keyframes.
 //  * A sequence's BoW vector is the L1-normalised sum of its keyframes' L1-normalised vectors.
 //  * A sequence with fewer than min_length (2) keyframes does not close on θ (short_sequences_grow);
 //    shorter ones (only the last one, at the end of a run) are neither queried nor filed.
@@ -18,6 +22,7 @@
 #include <cstdint>
 #include <memory>
 #include <optional>
+#include <string>
 #include <vector>
 
 #include "stillpoint/common/config_reader.hpp"
@@ -29,7 +34,10 @@ namespace sp::loop {
 using SequenceId = std::uint64_t;
 
 struct SequenceParams {
-  double theta_t = 0.1;         // θ_T: a larger rotation closes the sequence [rad], (0, π]
+  double theta_t = 0.1;  // θ_T: a larger rotation closes the sequence [rad], (0, π]
+  // What closes a sequence on θ: "rising-edge" (paper §III-B prose: θ1 < θ_T and θ2 > θ_T) or "level"
+  // (every θ >= θ_T; our first reading, kept so both can be measured).
+  std::string trigger = "rising-edge";
   int max_length = 15;          // L_T: keyframes per sequence at most [count], 1..1000
   int min_length = 2;           // shorter sequences never close a loop [count], 1..1000
   bool angle_to_first = false;  // measure θ against the sequence's first keyframe, not the previous one
@@ -88,6 +96,7 @@ class SequenceSegmenter {
   std::vector<std::shared_ptr<const BowVector>> bows_;
   Eigen::Matrix3d first_R_ = Eigen::Matrix3d::Identity();
   Eigen::Matrix3d last_R_ = Eigen::Matrix3d::Identity();
+  std::optional<double> last_step_;  // θ1: the step that brought the newest keyframe (any sequence)
 };
 
 }  // namespace sp::loop

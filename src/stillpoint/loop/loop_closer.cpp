@@ -23,6 +23,12 @@ LoopClosingConfig LoopClosingConfig::from_yaml(const ConfigReader& r) {
   r.read("place_model", c.place_model);
   r.read("vocabulary", c.vocabulary);
   c.detection = LoopDetectorParams::from_yaml(r.section("detection"));
+  if (r.has("sequence_trigger")) {
+    if (r.section("detection").section("sequence").has("trigger")) {
+      r.fail("sequence_trigger", "set either this or detection.sequence.trigger, not both");
+    }
+    r.read_choice("sequence_trigger", c.detection.sequence.trigger, {"rising-edge", "level"});
+  }
   r.read("min_keyframes", c.min_keyframes, std::size_t{2}, std::size_t{10000});
   r.read("min_descriptor_matches", c.min_descriptor_matches, 3, 10000);
   r.read("ransac_threshold_m", c.ransac_threshold_m, 0.001, 1.0);
