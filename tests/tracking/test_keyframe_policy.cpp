@@ -17,6 +17,10 @@ Eigen::Matrix3i grid(std::initializer_list<int> v) {
   return m;
 }
 
+// Eqs. 2-5 on hand-computed inputs. Cells are 1-based (row i, column j); x = Σ j·M_ij / ΣM, y = Σ i·M_ij /
+// ΣM; T1 = |(x, y) − (2, 2)| (Eq. 4 with the origin at the centre cell, docs/keyframe_policy.md); T2 =
+// dist(p1, p2) · M2 / (2√2 · M1) (Eq. 5 as printed). 2√2 = 2.8284271247.
+
 TEST(GridBalance, EmptyGridIsNotSpread) {
   const auto b = grid_balance(Eigen::Matrix3i::Zero());
   EXPECT_DOUBLE_EQ(b.t1, 0.0);
@@ -25,42 +29,60 @@ TEST(GridBalance, EmptyGridIsNotSpread) {
 }
 
 TEST(GridBalance, SingleCornerCell) {
-  // Centre of gravity at cell (1,1) (1-based) -> T1 = |(1,1) - (2,2)| = sqrt(2); no second cell -> T2 = 0.
+  // (x, y) = (1, 1) -> T1 = |(-1, -1)| = 1.41421356; no second cell (M2 = 0) -> T2 = 0.
   const auto b = grid_balance(grid({10, 0, 0, 0, 0, 0, 0, 0, 0}));
-  EXPECT_NEAR(b.t1, std::sqrt(2.0), 1e-12);
+  EXPECT_NEAR(b.t1, 1.4142135624, 1e-9);
   EXPECT_DOUBLE_EQ(b.t2, 0.0);
   EXPECT_FALSE(b.spread_out());
 }
 
 TEST(GridBalance, OppositeCornersAreSpread) {
-  // Balanced mass -> T1 = 0; equal cells two diagonal steps apart -> T2 = 1 * sqrt(8).
+  // (x, y) = (2, 2) -> T1 = 0; p1 = (1,1), p2 = (3,3): dist = 2√2, M2/M1 = 1 -> T2 = 2√2 / 2√2 = 1 (the
+  // maximum).
   const auto b = grid_balance(grid({10, 0, 0, 0, 0, 0, 0, 0, 10}));
   EXPECT_NEAR(b.t1, 0.0, 1e-12);
-  EXPECT_NEAR(b.t2, std::sqrt(8.0), 1e-12);
+  EXPECT_NEAR(b.t2, 1.0, 1e-12);
   EXPECT_TRUE(b.spread_out());
 }
 
 TEST(GridBalance, LeftColumnPairIsNotSpread) {
-  // Cells (1,1) and (2,1): centre of gravity (x=1, y=1.5) -> T1 = sqrt(1 + 0.25); T2 = 1 * 1.
+  // (1,1) = (2,1) = 10: x = 1, y = 1.5 -> T1 = |(-1, -0.5)| = 1.11803399; dist = 1 -> T2 = 1 / 2.82842712 =
+  // 0.35355339.
   const auto b = grid_balance(grid({10, 0, 0, 10, 0, 0, 0, 0, 0}));
-  EXPECT_NEAR(b.t1, std::sqrt(1.25), 1e-12);
-  EXPECT_NEAR(b.t2, 1.0, 1e-12);
+  EXPECT_NEAR(b.t1, 1.1180339887, 1e-9);
+  EXPECT_NEAR(b.t2, 0.3535533906, 1e-9);
   EXPECT_FALSE(b.spread_out());
 }
 
 TEST(GridBalance, WeakSecondCellDoesNotCount) {
-  // (1,1)=10, (3,3)=2: x = y = (10 + 3*2)/12 -> T1 = sqrt(2) * (2 - 16/12); T2 = 0.2 * sqrt(8).
+  // (1,1) = 10, (3,3) = 2: x = y = (10 + 3·2) / 12 = 4/3 -> T1 = √2 · 2/3 = 0.94280904;
+  // T2 = 2√2 · 0.2 / 2√2 = 0.2.
   const auto b = grid_balance(grid({10, 0, 0, 0, 0, 0, 0, 0, 2}));
-  EXPECT_NEAR(b.t1, std::sqrt(2.0) * (2.0 - 16.0 / 12.0), 1e-12);
-  EXPECT_NEAR(b.t2, 0.2 * std::sqrt(8.0), 1e-12);
+  EXPECT_NEAR(b.t1, 0.9428090416, 1e-9);
+  EXPECT_NEAR(b.t2, 0.2, 1e-12);
   EXPECT_FALSE(b.spread_out());
 }
 
 TEST(GridBalance, UniformGridIsSpread) {
+  // T1 = 0; the two largest (ties in row-major order) are (1,1) and (1,2): T2 = 1 / 2√2 = 0.35355339.
   const auto b = grid_balance(grid({5, 5, 5, 5, 5, 5, 5, 5, 5}));
   EXPECT_NEAR(b.t1, 0.0, 1e-12);
-  EXPECT_NEAR(b.t2, 1.0, 1e-12);  // two largest (ties in row-major order) are neighbours
+  EXPECT_NEAR(b.t2, 0.3535533906, 1e-9);
   EXPECT_TRUE(b.spread_out());
+}
+
+TEST(GridBalance, TheNormalisationDecides) {
+  // Top row, (1,1) = 10 and (1,3) = 6: x = (10 + 3·6) / 16 = 1.75, y = 1 -> T1 = |(-0.25, -1)| = 1.03077641;
+  // dist = 2, M2/M1 = 0.6 -> T2 = 1.2 / 2.82842712 = 0.42426407 < T1: not spread (without the 2√2, 1.2 > T1).
+  const auto top = grid_balance(grid({10, 0, 6, 0, 0, 0, 0, 0, 0}));
+  EXPECT_NEAR(top.t1, 1.0307764064, 1e-9);
+  EXPECT_NEAR(top.t2, 0.4242640687, 1e-9);
+  EXPECT_FALSE(top.spread_out());
+  // Middle row, (2,1) = 10 and (2,3) = 6: x = 1.75, y = 2 -> T1 = 0.25; T2 = 0.42426407 > T1: spread.
+  const auto middle = grid_balance(grid({0, 0, 0, 10, 0, 6, 0, 0, 0}));
+  EXPECT_NEAR(middle.t1, 0.25, 1e-12);
+  EXPECT_NEAR(middle.t2, 0.4242640687, 1e-9);
+  EXPECT_TRUE(middle.spread_out());
 }
 
 TEST(ViewingAngle, MatchesKnownRotationAboutThePoint) {
@@ -132,6 +154,62 @@ TEST(AdaptivePolicy, NeedsManySpreadEffectivePoints) {
   EXPECT_TRUE(policy->decide(c));  // 80 effective points in opposite corners
   c.view_changes.resize(60);       // 40 + 20: below the adaptive threshold of 75
   EXPECT_FALSE(policy->decide(c));
+  // Rule counts: 3 decisions; the corner frame met the threshold but was not spread; one inserted by
+  // the paper's rule; no safety net fired.
+  const auto counts = policy->rule_counts();
+  const auto count = [&](const std::string& rule) {
+    for (const auto& [name, n] : counts) {
+      if (name == rule) return static_cast<long>(n);
+    }
+    return -1L;
+  };
+  EXPECT_EQ(count("decisions"), 3);
+  EXPECT_EQ(count("any_effective"), 3);
+  EXPECT_EQ(count("threshold_met"), 2);
+  EXPECT_EQ(count("threshold_met_not_spread"), 1);
+  EXPECT_EQ(count("effective_spread"), 1);
+  EXPECT_EQ(count("inserted"), 1);
+  EXPECT_EQ(count("close_points"), 0);
+  EXPECT_EQ(count("weak_tracking"), 0);
+  EXPECT_EQ(count("reference_fallback"), 0);
+  EXPECT_EQ(count("vetoed_weak"), 0);
+}
+
+TEST(AdaptivePolicy, CountsTheRuleThatDecided) {
+  KeyframePolicyConfig cfg;
+  cfg.policy = "adaptive";
+  auto policy = make_keyframe_policy(cfg);
+  KeyframeCandidate c = healthy_candidate();
+  c.tracked_inliers = 10;  // <= min_inliers 15: vetoed
+  EXPECT_FALSE(policy->decide(c));
+  c = healthy_candidate();
+  c.tracked_inliers = 80;  // < 0.25 * 350: tracking weak
+  EXPECT_TRUE(policy->decide(c));
+  c = healthy_candidate();
+  c.tracked_inliers = 200;  // < 0.75 * 350 with mapping idle, no effective points: the fallback
+  EXPECT_TRUE(policy->decide(c));
+  c.mapping_idle = false;
+  c.mapping_queue = 5;  // swamped
+  EXPECT_FALSE(policy->decide(c));
+  const KeyframeRuleCounts expected = {{"decisions", 4},        {"vetoed_weak", 1},
+                                       {"vetoed_swamped", 1},   {"close_points", 0},
+                                       {"weak_tracking", 1},    {"any_effective", 0},
+                                       {"threshold_met", 0},    {"threshold_met_not_spread", 0},
+                                       {"effective_spread", 0}, {"reference_fallback", 1},
+                                       {"inserted", 2}};
+  EXPECT_EQ(policy->rule_counts(), expected);
+}
+
+TEST(HeuristicPolicy, CountsInsertionsAndTheirConditions) {
+  auto policy = make_keyframe_policy(KeyframePolicyConfig{});
+  KeyframeCandidate c = healthy_candidate();
+  EXPECT_FALSE(policy->decide(c));
+  c.tracked_inliers = 200;
+  EXPECT_TRUE(policy->decide(c));  // mapping idle and losing the reference
+  const KeyframeRuleCounts expected = {
+      {"decisions", 2},          {"vetoed_weak", 0},           {"vetoed_swamped", 0},        {"inserted", 1},
+      {"inserted_timed_out", 0}, {"inserted_mapping_idle", 1}, {"inserted_weak_or_close", 0}};
+  EXPECT_EQ(policy->rule_counts(), expected);
 }
 
 TEST(AdaptivePolicy, SafetyNetInsertsWhenCloseTrackedPointsRunOut) {

@@ -321,6 +321,8 @@ nlohmann::json SlamSystem::statistics() {
                      {"keyframes_vetoed", tracker_.guard_stats().keyframes_vetoed}};
   j["keyframes_created"] = keyframes_created_;
   j["keyframe_policy"] = tracker_.policy().name();
+  j["keyframe_rules"] = nlohmann::json::object();  // how often each rule of the policy fired
+  for (const auto& [rule, count] : tracker_.policy().rule_counts()) j["keyframe_rules"][rule] = count;
   j["dynamic_mode"] = culling_.mode();
   j["culled_features_total"] = culled_total_;
   if (culling_score_) j["culling_score"] = culling_score_->to_json();

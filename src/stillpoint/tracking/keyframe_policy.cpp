@@ -2,6 +2,8 @@
 
 #include <Eigen/Geometry>
 #include <algorithm>
+#include <array>
+#include <atomic>
 #include <cmath>
 
 #include "stillpoint/common/error.hpp"
@@ -47,12 +49,34 @@ SafetyNets safety_nets(const KeyframePolicyConfig& cfg, const KeyframeCandidate&
   return s;
 }
 
+// Per-rule counters; `Names` lists the JSON keys in rule order.
+template <std::size_t N>
+class RuleCounter {
+ public:
+  explicit RuleCounter(std::array<const char*, N> names) : names_(names) {}
+  void fire(std::size_t rule) const { counts_[rule].fetch_add(1, std::memory_order_relaxed); }
+  [[nodiscard]] KeyframeRuleCounts snapshot() const {
+    KeyframeRuleCounts out;
+    for (std::size_t i = 0; i < N; ++i)
+      out.emplace_back(names_[i], counts_[i].load(std::memory_order_relaxed));
+    return out;
+  }
+
+ private:
+  std::array<const char*, N> names_;
+  mutable std::array<std::atomic<std::size_t>, N> counts_{};
+};
+
 class HeuristicPolicy final : public KeyframePolicy {
  public:
   explicit HeuristicPolicy(KeyframePolicyConfig cfg) : cfg_(std::move(cfg)) {}
   [[nodiscard]] std::string name() const override { return "heuristic"; }
+  [[nodiscard]] KeyframeRuleCounts rule_counts() const override { return counter_.snapshot(); }
   [[nodiscard]] bool decide(const KeyframeCandidate& c) const override {
+    counter_.fire(kDecisions);
     const SafetyNets s = safety_nets(cfg_, c);
+    if (s.weak) counter_.fire(kVetoedWeak);
+    if (s.swamped) counter_.fire(kVetoedSwamped);
     if (s.weak || s.swamped) return false;
     // ORB-SLAM3 RGB-D: (c1a || c1b || c1c) && c2.
     const bool c1a = s.timed_out;
@@ -60,11 +84,30 @@ class HeuristicPolicy final : public KeyframePolicy {
         c.mapping_idle && static_cast<double>(c.frames_since_keyframe) >= cfg_.min_interval_s * c.fps;
     const bool c1c = c.tracked_inliers < 0.25 * c.reference_tracked || s.need_close;
     const bool c2 = s.losing_reference || s.need_close;
-    return (c1a || c1b || c1c) && c2;
+    const bool insert = (c1a || c1b || c1c) && c2;
+    if (insert) {
+      counter_.fire(kInserted);
+      if (c1a) counter_.fire(kTimedOut);
+      if (c1b) counter_.fire(kMappingIdle);
+      if (c1c) counter_.fire(kWeakOrClose);
+    }
+    return insert;
   }
 
  private:
+  // The c1 conditions are counted on inserted frames only, and are not exclusive.
+  enum Rule : std::size_t {
+    kDecisions,
+    kVetoedWeak,
+    kVetoedSwamped,
+    kInserted,
+    kTimedOut,
+    kMappingIdle,
+    kWeakOrClose
+  };
   KeyframePolicyConfig cfg_;
+  RuleCounter<7> counter_{{"decisions", "vetoed_weak", "vetoed_swamped", "inserted", "inserted_timed_out",
+                           "inserted_mapping_idle", "inserted_weak_or_close"}};
 };
 
 // Paper §III-A. A tracked point is "effective" when its viewing direction changed by more than
@@ -79,24 +122,60 @@ class AdaptivePolicy final : public KeyframePolicy {
   explicit AdaptivePolicy(KeyframePolicyConfig cfg) : cfg_(std::move(cfg)) {}
   [[nodiscard]] std::string name() const override { return "adaptive"; }
   [[nodiscard]] bool needs_view_changes() const override { return true; }
+  [[nodiscard]] KeyframeRuleCounts rule_counts() const override { return counter_.snapshot(); }
   [[nodiscard]] bool decide(const KeyframeCandidate& c) const override {
+    counter_.fire(kDecisions);
     const SafetyNets s = safety_nets(cfg_, c);
-    if (s.weak || s.swamped) return false;
-    if (s.need_close || c.tracked_inliers < 0.25 * c.reference_tracked) return true;
+    if (s.weak || s.swamped) {
+      counter_.fire(s.weak ? kVetoedWeak : kVetoedSwamped);
+      return false;
+    }
+    if (s.need_close) return inserted(kClosePoints);
+    if (c.tracked_inliers < 0.25 * c.reference_tracked) return inserted(kWeakTracking);
     const Eigen::Matrix3i grid =
         effective_point_grid(c.view_changes, c.image_width, c.image_height, cfg_.effective_angle_deg);
     const int effective = grid.sum();
     const double threshold = std::max<double>(cfg_.effective_min, cfg_.effective_share * c.tracked_inliers);
-    if (effective >= threshold && grid_balance(grid).spread_out()) return true;
+    if (effective > 0) counter_.fire(kAnyEffective);
+    if (effective >= threshold) {
+      counter_.fire(kThresholdMet);
+      if (grid_balance(grid).spread_out()) return inserted(kEffectiveSpread);
+      counter_.fire(kNotSpread);
+    }
     // Slow drift with no large view change: the reference keyframe is being lost and mapping can take a
     // keyframe (idle, or the maximum interval passed): ORB-SLAM3's coverage rule as the safety net.
     // Requiring both idle AND timed out (our first version) starved the map in walking_xyz, where people
     // hide parts of the reference keyframe without any 30-degree view change.
-    return (c.mapping_idle || s.timed_out) && s.losing_reference;
+    if ((c.mapping_idle || s.timed_out) && s.losing_reference) return inserted(kReferenceFallback);
+    return false;
   }
 
  private:
+  // Rules in the order decide() tries them; a frame is counted under the rule that decided it.
+  // any_effective / threshold_met / threshold_met_not_spread are diagnostics of the paper's rule on the
+  // frames that reached it (not decided by a veto or a safety net before).
+  enum Rule : std::size_t {
+    kDecisions,
+    kVetoedWeak,
+    kVetoedSwamped,
+    kClosePoints,
+    kWeakTracking,
+    kAnyEffective,
+    kThresholdMet,
+    kNotSpread,
+    kEffectiveSpread,
+    kReferenceFallback,
+    kInserted,
+  };
+  bool inserted(Rule rule) const {
+    counter_.fire(rule);
+    counter_.fire(kInserted);
+    return true;
+  }
   KeyframePolicyConfig cfg_;
+  RuleCounter<11> counter_{{"decisions", "vetoed_weak", "vetoed_swamped", "close_points", "weak_tracking",
+                            "any_effective", "threshold_met", "threshold_met_not_spread", "effective_spread",
+                            "reference_fallback", "inserted"}};
 };
 
 }  // namespace
@@ -127,11 +206,12 @@ Eigen::Matrix3i effective_point_grid(const std::vector<ViewChange>& changes, int
   return grid;
 }
 
-// Reading of Eqs. 2-5 (the paper is terse): cells are indexed by 1-based (row i, column j), so the
+// Reading of Eqs. 2-5 (docs/keyframe_policy.md): cells are indexed by 1-based (row i, column j), so the
 // centre cell is (2, 2). Centre of gravity: x = sum(j*M_ij)/sum(M), y = sum(i*M_ij)/sum(M) (Eqs. 2-3).
-// T1 = |(x, y) - (2, 2)|: how far the mass leans to one side (Eq. 4). With M1 >= M2 the two largest
-// cells at p1, p2: T2 = (M2/M1) * |p1 - p2| (Eq. 5): large when two strong, distant regions exist.
-// "Spread out" = T2 > T1. An empty grid is not spread out; a single occupied cell gives T2 = 0.
+// Eq. 4, T1 = sqrt(x^2 + y^2), with the origin at the centre cell: T1 = |(x, y) - (2, 2)|, how far the
+// mass leans to one side, in [0, sqrt(2)]. With M1 >= M2 the two largest cells at p1, p2:
+// T2 = |p1 - p2| * M2 / (2 sqrt(2) M1) (Eq. 5, as printed): 2 sqrt(2) is the corner-to-corner distance,
+// so T2 is in [0, 1]. "Spread out" = T2 > T1. An empty grid is not spread out; one occupied cell: T2 = 0.
 GridBalance grid_balance(const Eigen::Matrix3i& counts) {
   GridBalance b;
   const double total = counts.sum();
@@ -164,7 +244,8 @@ GridBalance grid_balance(const Eigen::Matrix3i& counts) {
   const double m1 = counts(i1, j1);
   const double m2 = counts(i2, j2);
   if (m1 <= 0) return b;
-  b.t2 = (m2 / m1) * std::hypot(static_cast<double>(i1 - i2), static_cast<double>(j1 - j2));
+  b.t2 = std::hypot(static_cast<double>(i1 - i2), static_cast<double>(j1 - j2)) * m2 /
+         (2.0 * std::sqrt(2.0) * m1);
   return b;
 }
 

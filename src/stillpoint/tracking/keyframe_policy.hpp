@@ -4,6 +4,7 @@
 #include <Eigen/Core>
 #include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "stillpoint/common/config_reader.hpp"
@@ -46,12 +47,18 @@ struct KeyframePolicyConfig {
   static KeyframePolicyConfig from_yaml(const ConfigReader& r);
 };
 
+// How often each rule of a policy fired, in the policy's own rule order: (stable JSON key, count).
+using KeyframeRuleCounts = std::vector<std::pair<std::string, std::size_t>>;
+
 class KeyframePolicy {
  public:
   virtual ~KeyframePolicy() = default;
   [[nodiscard]] virtual bool needs_view_changes() const { return false; }
+  // Decides and counts the rule that decided (thread-safe counters; decide itself is called by one thread).
   [[nodiscard]] virtual bool decide(const KeyframeCandidate& c) const = 0;
   [[nodiscard]] virtual std::string name() const = 0;
+  // Counts since construction (stats.json "keyframe_rules"); docs/keyframe_policy.md names each rule.
+  [[nodiscard]] virtual KeyframeRuleCounts rule_counts() const = 0;
 };
 
 std::unique_ptr<KeyframePolicy> make_keyframe_policy(const KeyframePolicyConfig& config);
@@ -59,7 +66,7 @@ std::unique_ptr<KeyframePolicy> make_keyframe_policy(const KeyframePolicyConfig&
 // The adaptive policy's distribution check on a 3x3 count matrix (exposed for tests).
 struct GridBalance {
   double t1 = 0;  // distance of the count matrix's centre of gravity from the centre cell (Eqs. 2-4)
-  double t2 = 0;  // spread of the two largest cells: (M2/M1) x distance between them (Eq. 5)
+  double t2 = 0;  // spread of the two largest cells: (M2/M1) x distance between them / 2√2 (Eq. 5), [0, 1]
   [[nodiscard]] bool spread_out() const { return t2 > t1; }
 };
 GridBalance grid_balance(const Eigen::Matrix3i& counts);
