@@ -4,6 +4,7 @@
 #include <spdlog/spdlog.h>
 
 #include <atomic>
+#include <filesystem>
 #include <thread>
 
 #include "commands.hpp"
@@ -75,6 +76,35 @@ std::filesystem::path default_config() {
   return std::filesystem::path(SP_SOURCE_DIR) / "config" / "stillpoint.yaml";
 }
 
+// Which of the paper's parts ran: culling mode and detector model, keyframe policy, loop detector.
+void print_methods(const nlohmann::json& s) {
+  const std::string mode = s.value("dynamic_mode", std::string("?"));
+  const std::string model = s.value("detector_model", std::string());
+  const std::string detector = model.empty() ? std::string("no detector")
+                                             : "detector " + std::filesystem::path(model).filename().string();
+  fmt::print("culling: {} ({}), {} features culled ({:.1f}/frame)\n", mode, detector,
+             s.value("culled_features_total", 0), s.value("culled_features_per_frame", 0.0));
+  std::string rules;
+  if (s.contains("keyframe_rules")) {
+    for (const auto& [rule, n] : s["keyframe_rules"].items()) {
+      const std::string key = rule;
+      if (key == "decisions" || key == "inserted" || key.rfind("any_", 0) == 0 ||
+          key.rfind("threshold", 0) == 0 || !n.is_number() || n.get<long>() == 0)
+        continue;
+      rules += fmt::format("{}{} {}", rules.empty() ? "" : ", ", key, n.get<long>());
+    }
+  }
+  fmt::print("keyframes: {} policy{}\n", s.value("keyframe_policy", std::string("?")),
+             rules.empty() ? std::string() : " (" + rules + ")");
+  const std::string loop = s.value("loop_detector", std::string("off"));
+  if (loop == "off") {
+    fmt::print("loop detection: off\n");
+  } else {
+    fmt::print("loop detection: {} ({} queries, {} loops detected, {} closed)\n", loop,
+               s.value("loop_queries", 0), s.value("loops_detected", 0), s.value("loops_closed", 0));
+  }
+}
+
 int run(const RunArgs& args) {
   const std::filesystem::path dataset =
       args.dataset.empty() ? default_dataset() : std::filesystem::path(args.dataset);
@@ -84,7 +114,10 @@ int run(const RunArgs& args) {
       args.config.empty() ? default_config() : std::filesystem::path(args.config);
   pipeline::SystemConfig config = pipeline::SystemConfig::load(config_file, args.overrides);
   if (!args.dynamic.empty()) config.dynamic.mode = args.dynamic;
-  if (!args.detector_model.empty()) config.dynamic.model = args.detector_model;
+  // A model given on the command line is the user's file: relative to the working directory (the
+  // configuration's own relative paths resolve against the project root).
+  if (!args.detector_model.empty())
+    config.dynamic.model = std::filesystem::absolute(args.detector_model).lexically_normal().string();
   if (!args.keyframe_policy.empty()) config.tracker.keyframes.policy = args.keyframe_policy;
   if (!args.loop_detector.empty()) config.loop.detector = args.loop_detector;
   InterruptWatcher interrupt;  // before any thread starts, so all threads inherit the blocked mask
@@ -131,6 +164,7 @@ int run(const RunArgs& args) {
     fmt::print("tracking thread: median {:.1f} ms/frame, p95 {:.1f} ms\n",
                s["stages_ms"]["frame"].value("median_ms", 0.0), s["stages_ms"]["frame"].value("p95_ms", 0.0));
   }
+  print_methods(s);
   if (result.ate_rmse) {
     const auto& e = s["eval"];
     fmt::print("ATE RMSE {:.4f} m | RPE trans RMSE {:.4f} m, rot RMSE {:.3f} deg (delta 1 s)\n",

@@ -45,10 +45,47 @@ TEST(SystemConfig, OtherMotionCheckKeysAndDynamicModeAreUsed) {
   EXPECT_EQ(c.dynamic.motion.max_points, 400);
 }
 
+// The defaults are the paper's system (issue 14): YOLOX-nano (shipped in models/) + flow culling,
+// adaptive keyframes, keyframe-sequence loop detection with the rising-edge rule.
 TEST(SystemConfig, ShippedFileLoadsWithItsDefaults) {
   const SystemConfig c = SystemConfig::load(kShipped);
   EXPECT_EQ(c.dynamic.mode, "auto");
-  EXPECT_EQ(c.loop.detector, "bow-keyframe");  // scripts/bench_dev.sh and docs rely on this default
+  EXPECT_EQ(c.dynamic.model, "models/yolox_nano/yolox_nano.onnx");
+  EXPECT_EQ(c.dynamic.resolved_mode(), "detector+flow");
+  EXPECT_TRUE(std::filesystem::exists(std::filesystem::path(SP_SOURCE_DIR) / c.dynamic.model));
+  EXPECT_EQ(c.tracker.keyframes.policy, "adaptive");
+  EXPECT_EQ(c.loop.detector, "bow-sequence");
+  EXPECT_EQ(c.loop.detection.sequence.trigger, "rising-edge");
+}
+
+// dynamic.model resolves against the project root as loop_closing.vocabulary does; absolute paths
+// are used as given; a missing file is an error naming it.
+TEST(DynamicCulling, ModelPathResolvesAgainstTheProjectRoot) {
+  DynamicConfig config;
+  config.mode = "detector+flow";
+  config.model = "models/yolox_nano/yolox_nano.onnx";
+  const geo::CameraIntrinsics camera;  // TUM fr3 defaults
+  const std::filesystem::path root(SP_SOURCE_DIR);
+  {
+    const DynamicCulling culling(config, camera, true, std::nullopt, root);
+    EXPECT_EQ(culling.model_file(), root / "models/yolox_nano/yolox_nano.onnx");
+  }
+  config.model = (root / "models/yolox_nano/yolox_nano.onnx").string();
+  {
+    const DynamicCulling culling(config, camera, true, std::nullopt, "/nonexistent");
+    EXPECT_EQ(culling.model_file(), root / "models/yolox_nano/yolox_nano.onnx");
+  }
+  config.model = "models/yolox_nano/yolox_nano.onnx";
+  try {
+    const DynamicCulling culling(config, camera, true, std::nullopt, "/nonexistent");
+    FAIL() << "expected an error for a model missing under the project root";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("/nonexistent/models/yolox_nano/yolox_nano.onnx"), std::string::npos)
+        << e.what();
+  }
+  config.mode = "flow";  // no detector: the model is not touched
+  const DynamicCulling flow(config, camera, true, std::nullopt, "/nonexistent");
+  EXPECT_TRUE(flow.model_file().empty());
 }
 
 // README: "every key documented". A line that sets a value (`key: value`) must carry a `#` comment

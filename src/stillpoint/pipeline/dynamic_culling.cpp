@@ -46,7 +46,8 @@ dyn::CullMode cull_mode_for(const std::string& mode) {
 }  // namespace
 
 DynamicCulling::DynamicCulling(const DynamicConfig& config, const geo::CameraIntrinsics& camera,
-                               bool deterministic, const std::optional<std::filesystem::path>& boxes_file)
+                               bool deterministic, const std::optional<std::filesystem::path>& boxes_file,
+                               const std::filesystem::path& project_root)
     : mode_(config.resolved_mode()),
       budget_ms_(config.detector_budget_ms),
       interval_(config.detector_interval) {
@@ -55,9 +56,11 @@ DynamicCulling::DynamicCulling(const DynamicConfig& config, const geo::CameraInt
   if (mode_ == "detector" || mode_ == "detector+flow") {
     if (config.model.empty())
       throw Error("dynamic mode '" + mode_ + "' needs a detector model (--detector-model)");
+    model_file_ = config.model;
+    if (model_file_.is_relative()) model_file_ = project_root / model_file_;
     dyn::DetectorConfig dc =
-        config.detector_configured ? config.detector : dyn::DetectorConfig::for_model(config.model);
-    dc.model = config.model;
+        config.detector_configured ? config.detector : dyn::DetectorConfig::for_model(model_file_.string());
+    dc.model = model_file_.string();
     if (!config.detector_configured) dc.threads = config.detector_threads;
     detector_ = std::make_unique<dyn::AsyncDetector>(
         dc, deterministic ? dyn::AsyncDetector::Mode::kSync : dyn::AsyncDetector::Mode::kAsync,

@@ -19,7 +19,7 @@ namespace sp::pipeline {
 struct DynamicConfig {
   // off | flow | detector | detector+flow | oracle | auto (= detector+flow with a model, else flow)
   std::string mode = "auto";
-  std::string model;                // detector model (.onnx or Darknet .cfg); empty = none
+  std::string model;  // detector model (.onnx or Darknet .cfg); empty = none; relative: from the project root
   double detector_budget_ms = 0.0;  // ms tracking may wait for the current frame's detection
   int detector_threads = 1;         // OpenCV threads for inference (the other core tracks and maps)
   int detector_interval = 3;        // detect every N-th frame; boxes are carried by flow in between
@@ -44,15 +44,19 @@ struct CullingOutput {
 
 class DynamicCulling {
  public:
-  // `boxes_file` is the sequence's boxes.txt (needed by oracle mode).
+  // `boxes_file` is the sequence's boxes.txt (needed by oracle mode). A relative `config.model` resolves
+  // against `project_root` (as loop_closing.vocabulary does); absolute paths are used as given.
   DynamicCulling(const DynamicConfig& config, const geo::CameraIntrinsics& camera, bool deterministic,
-                 const std::optional<std::filesystem::path>& boxes_file);
+                 const std::optional<std::filesystem::path>& boxes_file,
+                 const std::filesystem::path& project_root = ".");
   ~DynamicCulling();
   DynamicCulling(const DynamicCulling&) = delete;
   DynamicCulling& operator=(const DynamicCulling&) = delete;
 
   [[nodiscard]] bool enabled() const { return mode_ != "off"; }
   [[nodiscard]] const std::string& mode() const { return mode_; }
+  // The detector model file in use (resolved path); empty when no detector runs.
+  [[nodiscard]] const std::filesystem::path& model_file() const { return model_file_; }
   // Starts detection of a frame early (right after decoding) so it overlaps feature extraction.
   void submit(const io::FrameData& data);
   CullingOutput process(const io::FrameData& data, const cv::Mat& gray,
@@ -64,6 +68,7 @@ class DynamicCulling {
   double budget_ms_;
   int interval_;
   Eigen::Matrix3d K_;
+  std::filesystem::path model_file_;
   std::unique_ptr<dyn::AsyncDetector> detector_;
   std::optional<dyn::OracleDetections> oracle_;
   std::unique_ptr<dyn::DynamicFeatureFilter> filter_;

@@ -32,7 +32,8 @@ SlamSystem::SlamSystem(SystemConfig config, io::CameraConfig camera, const Syste
       camera_(std::move(camera)),
       deterministic_(options.deterministic),
       frontend_(config_.orb, camera_.intrinsics, with_camera_range(config_.depth, camera_)),
-      culling_(config_.dynamic, camera_.intrinsics, options.deterministic, options.boxes_file),
+      culling_(config_.dynamic, camera_.intrinsics, options.deterministic, options.boxes_file,
+               options.project_root),
       tracker_(map_, config_.tracker, camera_.intrinsics, with_camera_range(config_.depth, camera_),
                frontend_.pyramid(), camera_.fps),
       mapper_(map_, config_.mapping, camera_.intrinsics, with_camera_range(config_.depth, camera_),
@@ -324,6 +325,7 @@ nlohmann::json SlamSystem::statistics() {
   j["keyframe_rules"] = nlohmann::json::object();  // how often each rule of the policy fired
   for (const auto& [rule, count] : tracker_.policy().rule_counts()) j["keyframe_rules"][rule] = count;
   j["dynamic_mode"] = culling_.mode();
+  j["detector_model"] = culling_.model_file().string();  // empty when no detector ran
   j["culled_features_total"] = culled_total_;
   if (culling_score_) j["culling_score"] = culling_score_->to_json();
   j["culled_features_per_frame"] =
