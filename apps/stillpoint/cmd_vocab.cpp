@@ -106,8 +106,14 @@ void evaluate_loops(const std::filesystem::path& seq, const std::filesystem::pat
     }
   } view;
   view.w = window;
-  for (const char* method : {"bow-keyframe", "bow-sequence"}) {
-    auto det = sp::loop::make_loop_detector(method, sp::loop::LoopDetectorParams{});
+  // Per keyframe, then keyframe sequences with both readings of Algorithm 1 (docs/loop_sequences.md).
+  const std::vector<std::pair<std::string, std::string>> detectors = {
+      {"bow-keyframe", ""}, {"bow-sequence", "rising-edge"}, {"bow-sequence", "level"}};
+  for (const auto& [method_name, trigger] : detectors) {
+    sp::loop::LoopDetectorParams params;
+    if (!trigger.empty()) params.sequence.trigger = trigger;
+    const std::string method = trigger.empty() ? method_name : method_name + "/" + trigger;
+    auto det = sp::loop::make_loop_detector(method_name, params);
     std::vector<double> ms;
     std::size_t good = 0, bad = 0;
     std::string first = "none";
@@ -138,7 +144,7 @@ void evaluate_loops(const std::filesystem::path& seq, const std::filesystem::pat
     const auto st = det->stats();
     const auto sum = sp::summarize(ms);
     spdlog::info(
-        "{:13s} keyframes {} queries {} scored pairs {} candidates {} (GT-correct {}, wrong {}), first at kf "
+        "{:25s} keyframes {} queries {} scored pairs {} candidates {} (GT-correct {}, wrong {}), first at kf "
         "{}, "
         "detect total {:.2f} ms, mean {:.3f} ms/kf",
         method, st.keyframes, st.queries, st.scored_pairs, st.candidates, good, bad, first, sum.total,
@@ -203,7 +209,9 @@ void add_vocab_command(CLI::App& app) {
   auto every = std::make_shared<int>(10);
   auto window = std::make_shared<int>(10);
   auto* loops =
-      vocab->add_subcommand("loops", "Dry-run both loop detectors on a TUM sequence (ground-truth poses)");
+      vocab->add_subcommand("loops",
+                            "Dry-run the loop detectors on a TUM sequence (ground-truth poses): per "
+                            "keyframe, and keyframe sequences with both readings of Algorithm 1");
   loops->add_option("--sequence", *seq, "TUM sequence folder (rgb.txt, groundtruth.txt)")->required();
   loops->add_option("--vocab", *vfile, "vocabulary file")->capture_default_str();
   loops->add_option("--every", *every, "a keyframe every N frames")
