@@ -232,6 +232,38 @@ TEST(MotionCheck, LateDetectionIsCarriedToTheCurrentFrame) {
   EXPECT_EQ(r.residual_used, "homography");  // static camera: identity motion
 }
 
+// A patch walking towards the static camera (2.0 -> 1.8 -> 1.62 m) grows ~11 % per frame: the box
+// detected on frame 0 is carried to frame 2 by the points' median flow and the change of their spread.
+TEST(MotionCheck, CarriedBoxFollowsAnApproachingObjectsScale) {
+  const Scene s;
+  std::vector<Rendered> frames;
+  for (double z : {2.0, 1.8, 1.62}) {
+    const std::vector<Plane> planes = {{3.0, cv::Rect2d(), 200, &s.wall_tex, 0},
+                                       {z, cv::Rect2d(-0.05, -0.2, 0.3, 0.4), 300, &s.patch_tex, 2}};
+    frames.push_back(test::render(planes, Eigen::Isometry3d::Identity()));
+  }
+  const auto kps = test::grid_keypoints(640, 480, 8);
+  Detections det;  // detected on frame 0 only
+  det.frame_index = 0;
+  det.items = {{test::label_box(frames[0].label, 2), 0, 0.9f}};
+  DynamicFeatureFilter f{MotionCheckConfig{}};
+  DynamicResult r;
+  for (std::size_t i = 1; i < 3; ++i) {
+    DynamicInput in;
+    in.frame_index = i;
+    in.prev_gray = &frames[i - 1].gray;
+    in.gray = &frames[i].gray;
+    in.keypoints = &kps;
+    in.detections = &det;
+    r = f.process(in);
+  }
+  const cv::Rect2f truth = test::label_box(frames[2].label, 2);
+  ASSERT_EQ(r.boxes.size(), 1u);
+  EXPECT_LT(iou(det.items[0].box, truth), 0.75f);  // the stale box is a fifth too small
+  EXPECT_GT(iou(r.boxes[0].box, truth), 0.85f);
+  EXPECT_NEAR(r.boxes[0].box.width / truth.width, 1.0, 0.08);
+}
+
 TEST(MotionCheck, PausingPersonIsHeldDynamicThenReleased) {
   const Scene s;
   const cv::Point2d at[] = {{0, 0}, {0.05, 0}, {0.05, 0}, {0.05, 0}};  // moves once, then stands

@@ -159,15 +159,30 @@ std::vector<Detection> DynamicFeatureFilter::carry_boxes(const Detections& d, st
   for (const FlowStep& step : history_) {
     if (step.frame_index <= d.frame_index || step.frame_index > to_frame) continue;
     for (Detection& det : out) {
-      std::vector<float> dx, dy;
+      std::vector<std::size_t> in;
       for (std::size_t i = 0; i < step.prev.size(); ++i) {
-        if (!inside(det.box, step.prev[i])) continue;
-        dx.push_back(step.cur[i].x - step.prev[i].x);
-        dy.push_back(step.cur[i].y - step.prev[i].y);
+        if (inside(det.box, step.prev[i])) in.push_back(i);
       }
-      if (dx.size() < 3) continue;  // nothing to follow: leave the box where it is
-      det.box.x += median_of(dx);
-      det.box.y += median_of(dy);
+      if (in.size() < 3) continue;  // nothing to follow: leave the box where it is
+      std::vector<float> px, py, cx, cy;
+      for (std::size_t i : in) {
+        px.push_back(step.prev[i].x), py.push_back(step.prev[i].y);
+        cx.push_back(step.cur[i].x), cy.push_back(step.cur[i].y);
+      }
+      // The points' median moves by the median flow; the box also scales by the median change of
+      // the points' distances to it (a person walking towards the camera grows between detections).
+      const cv::Point2f c_prev(median_of(px), median_of(py)), c_cur(median_of(cx), median_of(cy));
+      std::vector<float> ratios;
+      for (std::size_t i : in) {
+        const float r_prev = static_cast<float>(cv::norm(step.prev[i] - c_prev));
+        if (r_prev > 8.f) ratios.push_back(static_cast<float>(cv::norm(step.cur[i] - c_cur)) / r_prev);
+      }
+      const float scale = ratios.size() >= 3 ? std::clamp(median_of(ratios), 0.8f, 1.25f) : 1.f;
+      // The box corner keeps its offset from the points' median, scaled.
+      det.box.x = c_cur.x + (det.box.x - c_prev.x) * scale;
+      det.box.y = c_cur.y + (det.box.y - c_prev.y) * scale;
+      det.box.width *= scale;
+      det.box.height *= scale;
     }
   }
   return out;
