@@ -305,6 +305,7 @@ TEST(MotionCheck, StillPersonIsDynamicUntilProvenStatic) {
   for (int proof : {0, 4}) {
     MotionCheckConfig cfg;
     cfg.static_proof_frames = proof;
+    cfg.still_people_fallback_keypoints = 100000;  // proven-still people are kept (tested below)
     DynamicFeatureFilter filter(cfg);
     for (std::size_t i = 1; i <= 6; ++i) {
       Detections det;
@@ -336,6 +337,57 @@ TEST(MotionCheck, StillPersonIsDynamicUntilProvenStatic) {
       }
       EXPECT_GT(suspect_in_chair, 50);
       EXPECT_EQ(suspect_far, 0);
+    }
+  }
+}
+
+// A person proven still is culled anyway while the rest of the image has enough keypoints; with only
+// a few keypoints outside the person, its features are used (and marked suspect).
+TEST(MotionCheck, ProvenStillPeopleAreCulledUnlessTheRestIsTooPoor) {
+  const Scene s;
+  const Rendered f = test::render(s.planes({0, 0}), Eigen::Isometry3d::Identity());
+  const cv::Rect2f person = test::label_box(f.label, 1);
+  const auto all = test::grid_keypoints(640, 480, 8);
+  // The person's keypoints and every 50th of the others (~80, spread over the image so the camera
+  // motion can still be fitted): fewer than still_people_fallback_keypoints (150) remain without it.
+  std::vector<cv::KeyPoint> poor;
+  for (std::size_t k = 0; k < all.size(); ++k) {
+    if (person.contains(all[k].pt) || k % 50 == 0) poor.push_back(all[k]);
+  }
+  for (const std::vector<cv::KeyPoint>* kps : {&all, static_cast<const std::vector<cv::KeyPoint>*>(&poor)}) {
+    MotionCheckConfig cfg;
+    cfg.static_proof_frames = 2;
+    DynamicFeatureFilter filter(cfg);
+    DynamicResult r;
+    for (std::size_t i = 1; i <= 4; ++i) {  // proven still from frame 2 on
+      Detections det;
+      det.frame_index = i;
+      det.items = {{person, 0, 0.9f}};
+      DynamicInput in;
+      in.frame_index = i;
+      in.prev_gray = &f.gray;
+      in.gray = &f.gray;
+      in.depth = &f.depth;
+      in.K = test::test_K();
+      in.keypoints = kps;
+      in.detections = &det;
+      r = filter.process(in);
+    }
+    int person_kept = 0, person_total = 0;
+    for (std::size_t k = 0; k < kps->size(); ++k) {
+      if (!person.contains((*kps)[k].pt)) continue;
+      ++person_total;
+      person_kept += r.keypoint_dynamic[k] ? 0 : 1;
+      if (!r.keypoint_dynamic[k]) EXPECT_TRUE(r.keypoint_suspect[k]);
+    }
+    ASSERT_GT(person_total, 100);
+    const bool rich = kps == &all;
+    EXPECT_EQ(r.still_people_released, !rich);
+    EXPECT_EQ(r.box_dynamic.at(0), rich);
+    if (rich) {
+      EXPECT_EQ(person_kept, 0);
+    } else {
+      EXPECT_EQ(person_kept, person_total);
     }
   }
 }

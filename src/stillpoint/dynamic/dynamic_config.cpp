@@ -50,6 +50,7 @@ MotionCheckConfig MotionCheckConfig::from_yaml(const ConfigReader& r) {
   r.read("always_dynamic_classes", c.always_dynamic_classes);
   r.read("dynamic_hold_frames", c.dynamic_hold_frames, 0, 1000);
   r.read("static_proof_frames", c.static_proof_frames, 0, 1000);
+  r.read("still_people_fallback_keypoints", c.still_people_fallback_keypoints, 0, 100000);
   r.read("ratio_at_object_depth", c.ratio_at_object_depth);
   r.read("keep_background_in_box", c.keep_background_in_box);
   r.read("background_depth_margin_m", c.background_depth_margin_m, 0.05, 10.0);

@@ -304,6 +304,7 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
   std::vector<float> object_depth(res.boxes.size(), 0.f);
   const auto bg_margin = static_cast<float>(cfg_.background_depth_margin_m);
   std::vector<bool> track_used(tracks_.size(), false);
+  std::vector<bool> still_person(res.boxes.size(), false);  // proven still: culled unless needed
   for (std::size_t b = 0; b < res.boxes.size(); ++b) {
     const Detection& det = res.boxes[b];
     const bool always = det.class_id >= 0 &&
@@ -386,8 +387,9 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
       dyn = always;
     } else {
       dyn = seen == Seen::kMoving || held || unproven;
+      still_person[b] = !dyn && always && cfg_.static_proof_frames > 0;
     }
-    res.box_dynamic[b] = dyn;
+    res.box_dynamic[b] = dyn || still_person[b];
   }
   std::erase_if(tracks_, [&](const BoxTrack& t) {
     return in.frame_index > t.last_seen_frame + static_cast<std::size_t>(std::max(cfg_.dynamic_hold_frames,
@@ -419,31 +421,45 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
     });
     return nearest;
   };
-  for (std::size_t k = 0; k < n_kp; ++k) {
-    const cv::Point2f& p = (*in.keypoints)[k].pt;
-    bool dyn = false;
-    bool near_object = false;
-    for (std::size_t b = 0; b < res.boxes.size() && !dyn; ++b) {
-      if (!inside(grow(res.boxes[b].box, 2.f * margin), p)) continue;
-      near_object = true;
-      if (!res.box_dynamic[b] || !inside(grow(res.boxes[b].box, margin), p)) continue;
-      dyn = true;
-      // Depth-separated points in the box (background behind, furniture in front) are kept.
-      if (cfg_.keep_background_in_box && object_depth[b] > 0.f) {
-        const float z = raw_depth(in.depth, p);
-        // No depth (edges, projector shadow): culled, missing a mover costs more than a lost point.
-        if (z > 0.f) dyn = std::abs(z - object_depth[b]) <= bg_margin;
+  const auto classify = [&] {
+    res.culled = 0;
+    for (std::size_t k = 0; k < n_kp; ++k) {
+      const cv::Point2f& p = (*in.keypoints)[k].pt;
+      bool dyn = false;
+      bool near_object = false;
+      for (std::size_t b = 0; b < res.boxes.size() && !dyn; ++b) {
+        if (!inside(grow(res.boxes[b].box, 2.f * margin), p)) continue;
+        near_object = true;
+        if (!res.box_dynamic[b] || !inside(grow(res.boxes[b].box, margin), p)) continue;
+        dyn = true;
+        // Depth-separated points in the box (background behind, furniture in front) are kept.
+        if (cfg_.keep_background_in_box && object_depth[b] > 0.f) {
+          const float z = raw_depth(in.depth, p);
+          // No depth (edges, projector shadow): culled, missing a mover costs more than a lost point.
+          if (z > 0.f) dyn = std::abs(z - object_depth[b]) <= bg_margin;
+        }
       }
+      if (!dyn && (cull_movers || do_flow)) {
+        const int j = nearest_flow(p);
+        const bool mover_near = j >= 0 && moving[static_cast<std::size_t>(j)];
+        dyn = cull_movers && j >= 0 && confirmed[static_cast<std::size_t>(j)];
+        near_object = near_object || mover_near;
+      }
+      res.keypoint_dynamic[k] = dyn;
+      res.keypoint_suspect[k] = !dyn && near_object;
+      res.culled += dyn ? 1 : 0;
     }
-    if (!dyn && (cull_movers || do_flow)) {
-      const int j = nearest_flow(p);
-      const bool mover_near = j >= 0 && moving[static_cast<std::size_t>(j)];
-      dyn = cull_movers && j >= 0 && confirmed[static_cast<std::size_t>(j)];
-      near_object = near_object || mover_near;
+  };
+  classify();
+  // People proven still are culled too while enough keypoints remain without them; only when the
+  // rest of the image is too poor are their features used (marked suspect for the pose guard).
+  const bool any_still = std::find(still_person.begin(), still_person.end(), true) != still_person.end();
+  if (any_still && static_cast<int>(n_kp) - res.culled < cfg_.still_people_fallback_keypoints) {
+    for (std::size_t b = 0; b < res.boxes.size(); ++b) {
+      if (still_person[b]) res.box_dynamic[b] = false;
     }
-    res.keypoint_dynamic[k] = dyn;
-    res.keypoint_suspect[k] = !dyn && near_object;
-    res.culled += dyn ? 1 : 0;
+    classify();
+    res.still_people_released = true;
   }
   res.ms = sw.elapsed_ms();
   return res;

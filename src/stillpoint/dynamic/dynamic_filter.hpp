@@ -53,6 +53,10 @@ struct MotionCheckConfig {
   // found it static in this many consecutive frames (a person is moving unless shown still). 0 = the
   // box is static until seen moving (the paper's literal reading, docs/dynamic.md) [0, 1000].
   int static_proof_frames = 8;
+  // A person proven still is culled too unless fewer than this many keypoints would remain: people are
+  // a last resort, used only when the rest of the image is too poor to track [0, 100000]. 0 = still
+  // people are always culled; a value above the keypoint count = always kept (the paper's reading).
+  int still_people_fallback_keypoints = 150;
   // The moving share of a box is counted over the points at the object's depth only, so background
   // seen through a loose box does not outvote the person [true]; false = over all points in the box.
   bool ratio_at_object_depth = true;
@@ -94,10 +98,11 @@ struct DynamicResult {
   std::vector<cv::Point2f> flow_prev;    // their positions in the previous frame
   std::vector<float> flow_residual;      // px; negative = no residual (e.g. no depth)
   std::vector<bool> flow_point_moving;
-  std::string residual_used;  // "epipolar", "reprojection" or "none"
-  int ego_inliers = 0;        // RANSAC inliers of the camera-motion fit
-  int culled = 0;             // keypoints marked dynamic
-  double ms = 0;              // wall time of process()
+  std::string residual_used;           // "epipolar", "reprojection" or "none"
+  int ego_inliers = 0;                 // RANSAC inliers of the camera-motion fit
+  int culled = 0;                      // keypoints marked dynamic
+  bool still_people_released = false;  // people proven still were kept: too few keypoints without them
+  double ms = 0;                       // wall time of process()
 };
 
 class DynamicFeatureFilter {
