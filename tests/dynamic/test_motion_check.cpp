@@ -204,6 +204,23 @@ TEST(MotionCheck, AblationModes) {
   EXPECT_EQ(DynamicFeatureFilter(cfg).process(input(p, true, &det)).culled, 0);
 }
 
+// Feeds frames 1.. to a default filter, each with the same (stale) detections; the last result.
+DynamicResult run_frames(const std::vector<Rendered>& frames, const std::vector<cv::KeyPoint>& kps,
+                         const Detections& det) {
+  DynamicFeatureFilter f{MotionCheckConfig{}};
+  DynamicResult r;
+  for (std::size_t i = 1; i < frames.size(); ++i) {
+    DynamicInput in;
+    in.frame_index = i;
+    in.prev_gray = &frames[i - 1].gray;
+    in.gray = &frames[i].gray;
+    in.keypoints = &kps;
+    in.detections = &det;
+    r = f.process(in);
+  }
+  return r;
+}
+
 TEST(MotionCheck, LateDetectionIsCarriedToTheCurrentFrame) {
   const Scene s;
   std::vector<Rendered> frames;
@@ -213,17 +230,7 @@ TEST(MotionCheck, LateDetectionIsCarriedToTheCurrentFrame) {
   Detections det;  // detected on frame 0, used on frames 1 and 2
   det.frame_index = 0;
   det.items = {{test::label_box(frames[0].label, 2), 0, 0.9f}};
-  DynamicFeatureFilter f{MotionCheckConfig{}};
-  DynamicResult r;
-  for (std::size_t i = 1; i < 3; ++i) {
-    DynamicInput in;
-    in.frame_index = i;
-    in.prev_gray = &frames[i - 1].gray;
-    in.gray = &frames[i].gray;
-    in.keypoints = &kps;
-    in.detections = &det;
-    r = f.process(in);
-  }
+  const DynamicResult r = run_frames(frames, kps, det);
   const cv::Rect2f truth = test::label_box(frames[2].label, 2);
   ASSERT_EQ(r.boxes.size(), 1u);
   EXPECT_LT(iou(det.items[0].box, truth), 0.6f);  // the stale box would be off
@@ -246,17 +253,7 @@ TEST(MotionCheck, CarriedBoxFollowsAnApproachingObjectsScale) {
   Detections det;  // detected on frame 0 only
   det.frame_index = 0;
   det.items = {{test::label_box(frames[0].label, 2), 0, 0.9f}};
-  DynamicFeatureFilter f{MotionCheckConfig{}};
-  DynamicResult r;
-  for (std::size_t i = 1; i < 3; ++i) {
-    DynamicInput in;
-    in.frame_index = i;
-    in.prev_gray = &frames[i - 1].gray;
-    in.gray = &frames[i].gray;
-    in.keypoints = &kps;
-    in.detections = &det;
-    r = f.process(in);
-  }
+  const DynamicResult r = run_frames(frames, kps, det);
   const cv::Rect2f truth = test::label_box(frames[2].label, 2);
   ASSERT_EQ(r.boxes.size(), 1u);
   EXPECT_LT(iou(det.items[0].box, truth), 0.75f);  // the stale box is a fifth too small

@@ -15,6 +15,7 @@
 #include <string>
 #include <vector>
 
+#include "../sequence_score.hpp"
 #include "stillpoint/common/timing.hpp"
 #include "stillpoint/dynamic/dynamic_filter.hpp"
 #include "stillpoint/dynamic/oracle_detections.hpp"
@@ -23,25 +24,7 @@ namespace {
 
 namespace fs = std::filesystem;
 
-struct Frame {
-  double stamp = 0;
-  std::string rgb, depth;
-};
-
-std::vector<Frame> read_associations(const fs::path& dir) {
-  std::ifstream in(dir / "associations.txt");
-  std::vector<Frame> f;
-  std::string line;
-  while (std::getline(in, line)) {
-    if (line.empty() || line[0] == '#') continue;
-    std::istringstream ss(line);
-    Frame fr;
-    double td = 0;
-    ss >> fr.stamp >> fr.rgb >> td >> fr.depth;
-    f.push_back(fr);
-  }
-  return f;
-}
+using sp::dyn::score::read_associations;
 
 double thread_cpu_ms() {
   timespec ts{};
