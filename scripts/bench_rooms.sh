@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The room-suite benchmark of issue 13: every sequence of the random-room suite (scripts/room_suite.sh)
-# with default settings and culling off, detector+flow (YOLOX-nano) or oracle boxes, and the two peers when they are built
+# with the shipped settings ("default": YOLOX-nano + flow culling), culling off, or oracle boxes, and the two peers when they are built
 # (../shared/tools/peer_orbslam2, ../shared/tools/peer_ngdslam), threaded, 3 repeats each; one table
 # per sequence (medians, ATE spread) and a summary per variant for the tune and held-back groups.
 # Usage: scripts/bench_rooms.sh [SUITE_DIR] [OUT_DIR] [extra bench args...]
@@ -18,6 +18,6 @@ peers=()
 peer_args=()
 ((${#peers[@]})) && peer_args=(--peers "$(IFS=,; echo "${peers[*]}")")
 "$B" bench --suite "$SUITE" --detector-model "$M" --out "$OUT" --repeats 3 \
-  --variant "off=--dynamic off" --variant "detector+flow=--dynamic detector+flow" \
+  --variant "off=--dynamic off" --variant "default=" \
   --variant "oracle=--dynamic oracle" \
   "${peer_args[@]}" "$@"
