@@ -290,6 +290,20 @@ TEST(MotionCheck, PausingPersonIsHeldDynamicThenReleased) {
   }
 }
 
+// Frame i of a static camera watching a still scene: the same image as previous and current frame.
+DynamicInput still_input(const Rendered& f, std::size_t i, const std::vector<cv::KeyPoint>* kps,
+                         const Detections* det) {
+  DynamicInput in;
+  in.frame_index = i;
+  in.prev_gray = &f.gray;
+  in.gray = &f.gray;
+  in.depth = &f.depth;
+  in.K = test::test_K();
+  in.keypoints = kps;
+  in.detections = det;
+  return in;
+}
+
 // A person standing still (the board, boxed as a person) next to a chair (boxed, class 56), static
 // camera: the person stays dynamic until the motion check has seen it still static_proof_frames
 // times in a row; the chair, not of a dynamic class, is static from the first check; kept keypoints
@@ -308,15 +322,7 @@ TEST(MotionCheck, StillPersonIsDynamicUntilProvenStatic) {
       Detections det;
       det.frame_index = i;
       det.items = {{person, 0, 0.9f}, {chair, 56, 0.9f}};
-      DynamicInput in;
-      in.frame_index = i;
-      in.prev_gray = &f.gray;
-      in.gray = &f.gray;
-      in.depth = &f.depth;
-      in.K = test::test_K();
-      in.keypoints = &kps;
-      in.detections = &det;
-      const DynamicResult r = filter.process(in);
+      const DynamicResult r = filter.process(still_input(f, i, &kps, &det));
       ASSERT_EQ(r.box_dynamic.size(), 2u);
       EXPECT_EQ(r.box_dynamic[0], static_cast<int>(i) < proof) << "proof " << proof << " frame " << i;
       EXPECT_FALSE(r.box_dynamic[1]) << "frame " << i;
@@ -360,15 +366,7 @@ TEST(MotionCheck, ProvenStillPeopleAreCulledUnlessTheRestIsTooPoor) {
       Detections det;
       det.frame_index = i;
       det.items = {{person, 0, 0.9f}};
-      DynamicInput in;
-      in.frame_index = i;
-      in.prev_gray = &f.gray;
-      in.gray = &f.gray;
-      in.depth = &f.depth;
-      in.K = test::test_K();
-      in.keypoints = kps;
-      in.detections = &det;
-      r = filter.process(in);
+      r = filter.process(still_input(f, i, kps, &det));
     }
     int person_kept = 0, person_total = 0;
     for (std::size_t k = 0; k < kps->size(); ++k) {
