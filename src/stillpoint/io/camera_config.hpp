@@ -20,8 +20,24 @@ struct CameraConfig {
   static CameraConfig from_yaml(const ConfigReader& r);
 };
 
-// Reads a camera.yaml; a missing key, an unknown key or a value out of range is a ConfigError naming
-// the file, the key and the line.
+// The camera settings formats load_camera_config understands.
+enum class CameraFormat {
+  StillPoint,  // our camera.yaml (keys above)
+  OrbSlam,     // ORB-SLAM2 / ORB-SLAM3 settings: `%YAML:1.0`, Camera.fx or Camera1.fx (3 >= 1.0), ...
+  Stella,      // stella_vslam / OpenVSLAM: a `Camera:` map (or Camera.* keys) with model and setup
+};
+
+// Which format a settings file is written in (by its keys; ORB-SLAM's `%YAML:1.0` first line is
+// accepted). Throws a ConfigError for unreadable YAML.
+CameraFormat detect_camera_format(const std::filesystem::path& file);
+
+// Reads a camera file in any CameraFormat. Our camera.yaml is strict: a missing key, an unknown key or a
+// value out of range is a ConfigError naming the file, the key and the line. ORB-SLAM and stella_vslam
+// files carry many other settings (ORB, viewer, tracking) that are ignored; from them we read the
+// pinhole intrinsics and radial-tangential distortion (k1 k2 p1 p2 [k3]), image size, fps and the depth
+// map factor (ORB-SLAM: DepthMapFactor or RGBD.DepthMapFactor; stella: depthmap_factor under
+// Preprocessing, Tracking or Camera). Other camera models (fisheye, Kannala-Brandt, equirectangular) and
+// a missing depth factor are ConfigErrors.
 CameraConfig load_camera_config(const std::filesystem::path& file);
 
 }  // namespace sp::io

@@ -36,18 +36,16 @@ std::vector<StampedPose> read_tum_trajectory(const std::filesystem::path& file) 
   return out;
 }
 
-void write_tum_trajectory(const std::filesystem::path& file, const std::vector<StampedPose>& poses) {
+namespace {
+// Writes through a temporary file renamed into place.
+template <class Body>
+void write_atomically(const std::filesystem::path& file, Body&& body) {
   if (file.has_parent_path()) std::filesystem::create_directories(file.parent_path());
   const std::filesystem::path tmp = file.string() + ".tmp";
   {
     std::ofstream out(tmp);
     if (!out) throw InputError(tmp.string(), 0, "cannot open for writing");
-    out << "# timestamp tx ty tz qx qy qz qw\n";
-    for (const auto& p : poses) {
-      const Eigen::Quaterniond q = p.q.normalized();
-      out << fmt::format("{:.6f} {:.10g} {:.10g} {:.10g} {:.10g} {:.10g} {:.10g} {:.10g}\n", p.stamp, p.t.x(),
-                         p.t.y(), p.t.z(), q.x(), q.y(), q.z(), q.w());
-    }
+    body(out);
     out.flush();
     if (!out) throw InputError(tmp.string(), 0, "write failed");
   }
@@ -57,6 +55,37 @@ void write_tum_trajectory(const std::filesystem::path& file, const std::vector<S
     std::filesystem::remove(tmp, ec);
     throw InputError(file.string(), 0, "cannot move the finished file into place");
   }
+}
+}  // namespace
+
+void write_tum_trajectory(const std::filesystem::path& file, const std::vector<StampedPose>& poses) {
+  write_atomically(file, [&](std::ofstream& out) {
+    out << "# timestamp tx ty tz qx qy qz qw\n";
+    for (const auto& p : poses) {
+      const Eigen::Quaterniond q = p.q.normalized();
+      out << fmt::format("{:.6f} {:.10g} {:.10g} {:.10g} {:.10g} {:.10g} {:.10g} {:.10g}\n", p.stamp, p.t.x(),
+                         p.t.y(), p.t.z(), q.x(), q.y(), q.z(), q.w());
+    }
+  });
+}
+
+void write_kitti_trajectory(const std::filesystem::path& file, const std::vector<StampedPose>& poses) {
+  write_atomically(file, [&](std::ofstream& out) {
+    for (const auto& p : poses) {
+      const Eigen::Matrix3d R = p.q.normalized().toRotationMatrix();
+      for (int r = 0; r < 3; ++r) {
+        out << fmt::format("{}{:.10g} {:.10g} {:.10g} {:.10g}", r == 0 ? "" : " ", R(r, 0), R(r, 1), R(r, 2),
+                           p.t(r));
+      }
+      out << "\n";
+    }
+  });
+}
+
+void write_stamps(const std::filesystem::path& file, const std::vector<StampedPose>& poses) {
+  write_atomically(file, [&](std::ofstream& out) {
+    for (const auto& p : poses) out << fmt::format("{:.6f}\n", p.stamp);
+  });
 }
 
 }  // namespace sp::io

@@ -22,4 +22,10 @@ std::vector<StampedPose> read_tum_trajectory(const std::filesystem::path& file);
 // file renamed into place so a reader never sees half a file.
 void write_tum_trajectory(const std::filesystem::path& file, const std::vector<StampedPose>& poses);
 
+// KITTI odometry format: one line per pose, the first three rows of T_world_camera row-major
+// (`r11 r12 r13 tx r21 r22 r23 ty r31 r32 r33 tz`), no timestamps (write_stamps writes them, one per
+// line, like KITTI's times.txt). Same temporary-file rename as above.
+void write_kitti_trajectory(const std::filesystem::path& file, const std::vector<StampedPose>& poses);
+void write_stamps(const std::filesystem::path& file, const std::vector<StampedPose>& poses);
+
 }  // namespace sp::io

@@ -58,6 +58,8 @@ void write_outputs(SlamSystem& system, const RunOptions& options, const nlohmann
   std::filesystem::create_directories(options.out_dir);
   const auto trajectory = system.trajectory();
   io::write_tum_trajectory(options.out_dir / "trajectory.txt", trajectory);
+  io::write_kitti_trajectory(options.out_dir / "trajectory_kitti.txt", trajectory);
+  io::write_stamps(options.out_dir / "trajectory_kitti_times.txt", trajectory);
   io::write_tum_trajectory(options.out_dir / "keyframes.txt", system.keyframe_trajectory());
   result.stats = system.statistics();
   result.stats["completed"] = result.completed;
