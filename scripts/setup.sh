@@ -9,6 +9,7 @@ PACKAGES=(
   chromium nodejs  # report: headless-browser test; npm fetches three.js at build time
   python3-opencv python3-numpy ccache  # scripts/room_suite.sh renders with dynsynth; ccache speeds rebuilds
   python3-onnx  # scripts/make_yolov7_tiny_onnx.py (YOLOv7-tiny graph with random weights, tests/dynamic)
+  pybind11-dev python3-dev python3-pytest  # the Python bindings (python/) and their pytest tests
   clang libclang-rt-14-dev  # sanitizer builds and libFuzzer targets (scripts/sanitize.sh, scripts/fuzz.sh)
   $(command -v npm >/dev/null || echo npm)  # NodeSource's nodejs ships npm and conflicts with Debian's
 )

@@ -8,11 +8,13 @@
 #include <thread>
 
 #include "commands.hpp"
+#include "stillpoint/common/data_dir.hpp"
 #include "stillpoint/common/error.hpp"
 #include "stillpoint/io/camera_config.hpp"
 #include "stillpoint/io/openni2_source.hpp"
 #include "stillpoint/io/tum_sequence.hpp"
 #include "stillpoint/pipeline/runner.hpp"
+#include "stillpoint/pipeline/slam_system.hpp"
 
 namespace sp::app {
 
@@ -69,12 +71,9 @@ struct RunArgs {
   std::vector<std::string> overrides;  // --set section.key=value
 };
 
-std::filesystem::path default_dataset() {
-  return std::filesystem::path(SP_SOURCE_DIR) / "data" / "demo" / "walking_xyz_demo";
-}
-std::filesystem::path default_config() {
-  return std::filesystem::path(SP_SOURCE_DIR) / "config" / "stillpoint.yaml";
-}
+// The data folder (config/, data/, models/) of this binary: $STILLPOINT_DATA_DIR, else share/stillpoint
+// beside the installed binary (or the build tree's link to the source tree), see common/data_dir.hpp.
+std::filesystem::path data_dir() { return resolve_data_dir(current_executable()); }
 
 // Which of the paper's parts ran: culling mode and detector model, keyframe policy, loop detector.
 void print_methods(const nlohmann::json& s) {
@@ -106,12 +105,13 @@ void print_methods(const nlohmann::json& s) {
 }
 
 int run(const RunArgs& args) {
-  const std::filesystem::path dataset =
-      args.dataset.empty() ? default_dataset() : std::filesystem::path(args.dataset);
+  const std::filesystem::path data = data_dir();
+  const std::filesystem::path dataset = args.dataset.empty() ? data / "data" / "demo" / "walking_xyz_demo"
+                                                             : std::filesystem::path(args.dataset);
   if (args.dataset.empty())
     spdlog::info("no --dataset given: running the bundled demo sequence {}", dataset.string());
   const std::filesystem::path config_file =
-      args.config.empty() ? default_config() : std::filesystem::path(args.config);
+      args.config.empty() ? data / "config" / "stillpoint.yaml" : std::filesystem::path(args.config);
   pipeline::SystemConfig config = pipeline::SystemConfig::load(config_file, args.overrides);
   if (!args.dynamic.empty()) config.dynamic.mode = args.dynamic;
   // A model given on the command line is the user's file: relative to the working directory (the
@@ -120,6 +120,8 @@ int run(const RunArgs& args) {
     config.dynamic.model = std::filesystem::absolute(args.detector_model).lexically_normal().string();
   if (!args.keyframe_policy.empty()) config.tracker.keyframes.policy = args.keyframe_policy;
   if (!args.loop_detector.empty()) config.loop.detector = args.loop_detector;
+  if (config.loop.detector == "netvlad" && !pipeline::has_place_recognition())
+    throw Error(pipeline::netvlad_unavailable_message());
   InterruptWatcher interrupt;  // before any thread starts, so all threads inherit the blocked mask
   std::unique_ptr<io::FrameSource> source;
   std::optional<std::filesystem::path> groundtruth;
@@ -144,7 +146,7 @@ int run(const RunArgs& args) {
   options.groundtruth = groundtruth;
   options.boxes_file = dataset / "boxes.txt";
   options.masks_dir = dataset / "masks";
-  options.project_root = SP_SOURCE_DIR;
+  options.project_root = data;  // relative paths the configuration's folder does not hold
   options.stop = &interrupt.flag();
   options.label = dataset.filename().string();
   if (!args.load_map.empty()) options.load_map = args.load_map;
@@ -170,8 +172,10 @@ int run(const RunArgs& args) {
     fmt::print("ATE RMSE {:.4f} m | RPE trans RMSE {:.4f} m, rot RMSE {:.3f} deg (delta 1 s)\n",
                *result.ate_rmse, e["rpe_trans"].value("rmse", 0.0), e["rpe_rot_deg"].value("rmse", 0.0));
   }
-  fmt::print("outputs: {}/trajectory.txt, keyframes.txt, stats.json, map_points.ply{}{}, culled/\n", args.out,
-             args.dense_cloud ? ", dense_cloud.ply" : "", result.ate_rmse ? ", trajectory.png" : "");
+  fmt::print(
+      "outputs: {}/trajectory.txt (TUM; trajectory_kitti.txt: KITTI), keyframes.txt, stats.json, "
+      "map_points.ply{}{}, culled/\n",
+      args.out, args.dense_cloud ? ", dense_cloud.ply" : "", result.ate_rmse ? ", trajectory.png" : "");
   if (s.contains("map_loaded")) {
     const auto& m = s["map_loaded"];
     fmt::print("map loaded: {} keyframes, {} points; first relocalised frame: {}\n", m.value("keyframes", 0),
@@ -195,8 +199,10 @@ void add_run_command(CLI::App& app) {
       app.add_subcommand("run", "Run SLAM on a TUM-format RGB-D sequence (default: the bundled demo)");
   cmd->add_option("--dataset", args->dataset, "Sequence folder in TUM RGB-D layout (default: bundled demo)");
   cmd->add_option("--config", args->config, "System configuration YAML (default: config/stillpoint.yaml)");
-  cmd->add_option("--camera", args->camera,
-                  "Camera YAML (default: DATASET/camera.yaml), or 'openni2' for a live RGB-D camera");
+  cmd->add_option(
+      "--camera", args->camera,
+      "Camera YAML: ours, ORB-SLAM2/3 or stella_vslam settings (default: DATASET/camera.yaml), or "
+      "'openni2' for a live RGB-D camera");
   cmd->add_option("--camera-config", args->camera_config,
                   "Intrinsics YAML for a live camera (default: from its FOV)");
   cmd->add_option("--out", args->out, "Output folder")->capture_default_str();

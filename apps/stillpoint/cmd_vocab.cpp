@@ -11,6 +11,7 @@
 #include <sstream>
 
 #include "commands.hpp"
+#include "stillpoint/common/data_dir.hpp"
 #include "stillpoint/common/error.hpp"
 #include "stillpoint/common/timing.hpp"
 #include "stillpoint/features/orb_extractor.hpp"
@@ -205,7 +206,7 @@ void add_vocab_command(CLI::App& app) {
   });
 
   auto seq = std::make_shared<std::string>();
-  auto vfile = std::make_shared<std::string>(std::string(SP_SOURCE_DIR) + "/data/vocab/stillpoint_orb.spv");
+  auto vfile = std::make_shared<std::string>();  // default: the shipped vocabulary in the data folder
   auto every = std::make_shared<int>(10);
   auto window = std::make_shared<int>(10);
   auto* loops =
@@ -213,14 +214,21 @@ void add_vocab_command(CLI::App& app) {
                             "Dry-run the loop detectors on a TUM sequence (ground-truth poses): per "
                             "keyframe, and keyframe sequences with both readings of Algorithm 1");
   loops->add_option("--sequence", *seq, "TUM sequence folder (rgb.txt, groundtruth.txt)")->required();
-  loops->add_option("--vocab", *vfile, "vocabulary file")->capture_default_str();
+  loops->add_option("--vocab", *vfile, "vocabulary file (default: DATA/data/vocab/stillpoint_orb.spv)");
   loops->add_option("--every", *every, "a keyframe every N frames")
       ->capture_default_str()
       ->check(CLI::Range(1, 1000));
   loops->add_option("--window", *window, "keyframes this close in time count as covisible")
       ->capture_default_str()
       ->check(CLI::Range(1, 1000));
-  loops->callback([=] { evaluate_loops(*seq, *vfile, *every, *window); });
+  loops->callback([=] {
+    const std::string vocab_file =
+        vfile->empty()
+            ? (sp::resolve_data_dir(sp::current_executable()) / "data" / "vocab" / "stillpoint_orb.spv")
+                  .string()
+            : *vfile;
+    evaluate_loops(*seq, vocab_file, *every, *window);
+  });
 }
 
 }  // namespace sp::app

@@ -7,10 +7,14 @@
 #include "commands.hpp"
 #include "stillpoint/common/error.hpp"
 #include "stillpoint/common/logging.hpp"
+#include "stillpoint/version.hpp"
 
 int main(int argc, char** argv) {
   CLI::App app{"StillPoint: RGB-D visual SLAM that keeps only the still points"};
   app.require_subcommand(1);
+  app.set_version_flag("--version", std::string("stillpoint ") + STILLPOINT_VERSION +
+                                        (SP_WITH_TORCH ? " (with libtorch: netvlad, vpr)"
+                                                       : " (without libtorch: no netvlad, no vpr)"));
   std::string log_level = "info";
   app.add_option("--log-level", log_level, "trace|debug|info|warn|error|off")->capture_default_str();
 #ifdef SP_HAVE_CMD_EVAL

@@ -27,6 +27,20 @@ track::DepthModel with_camera_range(track::DepthModel d, const io::CameraConfig&
 }
 }  // namespace
 
+bool has_place_recognition() {
+#ifdef SP_HAVE_PLACE
+  return true;
+#else
+  return false;
+#endif
+}
+
+std::string netvlad_unavailable_message() {
+  return "loop detector 'netvlad' (ParC_NetVLAD) is not available: this StillPoint was built without "
+         "libtorch (-DSTILLPOINT_WITH_TORCH=OFF); use loop_closing.detector bow-sequence or bow-keyframe, "
+         "or rebuild with libtorch (Debian libtorch-dev)";
+}
+
 SlamSystem::SlamSystem(SystemConfig config, io::CameraConfig camera, const SystemOptions& options)
     : config_(std::move(config)),
       camera_(std::move(camera)),
@@ -81,7 +95,7 @@ void SlamSystem::attach_place_model([[maybe_unused]] const std::filesystem::path
   // Only the loop-closing thread calls it (the extractor is not thread-safe).
   closer_->set_global_describer([extractor](const cv::Mat& bgr) { return extractor->describe(bgr); });
 #else
-  throw Error("loop detector 'netvlad' needs the place module (libtorch): this build has none");
+  throw Error(netvlad_unavailable_message());
 #endif
 }
 
@@ -273,8 +287,15 @@ FrameReport SlamSystem::process(const io::FrameData& data) {
   }
   times_.add("frame", frame_watch.elapsed_ms());
   ++frames_;
-  return {outcome.state, outcome.inliers, frame.features.size(), frame.culled,
-          outcome.new_keyframe != map::kNoKeyframe};
+  FrameReport report{outcome.state,
+                     outcome.inliers,
+                     frame.features.size(),
+                     frame.culled,
+                     outcome.new_keyframe != map::kNoKeyframe,
+                     outcome.new_keyframe,
+                     std::nullopt};
+  if (outcome.state == track::TrackingState::Ok && frame.has_pose) report.T_wc = frame.T_cw.inverse();
+  return report;
 }
 
 void SlamSystem::finish() {

@@ -29,7 +29,16 @@ struct FrameReport {
   std::size_t features = 0;
   std::size_t culled = 0;
   bool keyframe = false;
+  map::KeyframeId keyframe_id = map::kNoKeyframe;  // the keyframe this frame became, if any
+  // The frame's camera pose as tracked (T_world_camera), when the tracker gave one (state Ok). Later
+  // map corrections move it; trajectory() resolves every pose against the corrected map.
+  std::optional<geo::SE3> T_wc;
 };
+
+// Whether this build has ParC_NetVLAD (libtorch): without it the 'netvlad' loop detector is refused.
+[[nodiscard]] bool has_place_recognition();
+// The message for a run that asks for 'netvlad' in a build without it.
+[[nodiscard]] std::string netvlad_unavailable_message();
 
 struct SystemOptions {
   bool deterministic = false;

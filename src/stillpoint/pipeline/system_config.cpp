@@ -1,6 +1,32 @@
 #include "stillpoint/pipeline/system_config.hpp"
 
+#include <algorithm>
+#include <system_error>
+
 namespace sp::pipeline {
+
+namespace {
+std::string* path_field(SystemConfig& c, const std::string& key) {
+  if (key == "loop_closing.vocabulary") return &c.loop.vocabulary;
+  if (key == "loop_closing.place_model") return &c.loop.place_model;
+  if (key == "dynamic.model") return &c.dynamic.model;
+  return nullptr;
+}
+}  // namespace
+
+void resolve_relative_paths(SystemConfig& config, const std::filesystem::path& dir,
+                            const std::vector<std::string>& skip) {
+  for (const char* key : kPathKeys) {
+    if (std::find(skip.begin(), skip.end(), key) != skip.end()) continue;
+    std::string* value = path_field(config, key);
+    if (value == nullptr || value->empty()) continue;
+    const std::filesystem::path p(*value);
+    if (p.is_absolute()) continue;
+    std::error_code ec;
+    const std::filesystem::path candidate = std::filesystem::absolute(dir / p, ec).lexically_normal();
+    if (!ec && std::filesystem::exists(candidate, ec)) *value = candidate.string();
+  }
+}
 
 PipelineConfig PipelineConfig::from_yaml(const ConfigReader& r) {
   PipelineConfig c;
@@ -68,6 +94,17 @@ SystemConfig SystemConfig::load(const std::filesystem::path& file,
   const ConfigReader r = ConfigReader::from_string(out.c_str(), file.string() + " with --set");
   SystemConfig c = from_yaml(r);
   r.finish();
+  // Paths typed on the command line are the user's: from the working directory; the file's own
+  // paths from the file's folder.
+  std::vector<std::string> from_file, from_command_line;
+  for (const char* key : kPathKeys) {
+    const bool overridden = std::any_of(overrides.begin(), overrides.end(), [key](const std::string& o) {
+      return o.substr(0, o.find('=')) == key;
+    });
+    (overridden ? from_command_line : from_file).push_back(key);
+  }
+  resolve_relative_paths(c, std::filesystem::current_path(), from_file);
+  resolve_relative_paths(c, file.parent_path(), from_command_line);
   return c;
 }
 
@@ -75,6 +112,7 @@ SystemConfig SystemConfig::load(const std::filesystem::path& file) {
   const ConfigReader r = ConfigReader::from_file(file);
   SystemConfig c = from_yaml(r);
   r.finish();
+  resolve_relative_paths(c, file.parent_path());
   return c;
 }
 

@@ -31,12 +31,25 @@ struct SystemConfig {
   PipelineConfig pipeline;
 
   static SystemConfig from_yaml(const ConfigReader& r);
-  // Loads and validates a file; every key must be known.
+  // Loads and validates a file; every key must be known. Relative resource paths (the keys in
+  // kPathKeys) resolve against the file's folder when the file they name exists there (made absolute);
+  // otherwise they stay relative and resolve later against the data folder (SystemOptions::project_root:
+  // share/stillpoint or the source tree), so a copy of the shipped file still finds the shipped data.
   static SystemConfig load(const std::filesystem::path& file);
   // The same with overrides "section.key=value" (the CLI's --set) applied to the file's YAML first;
-  // a value is YAML ("0.5", "true", "[person, dog]"). Malformed overrides are ConfigErrors.
+  // a value is YAML ("0.5", "true", "[person, dog]"). Malformed overrides are ConfigErrors. A relative
+  // path given in an override is looked up from the working directory first, then as above.
   static SystemConfig load(const std::filesystem::path& file, const std::vector<std::string>& overrides);
 };
+
+// The configuration keys that name files: loop_closing.vocabulary, loop_closing.place_model, dynamic.model.
+inline constexpr const char* kPathKeys[] = {"loop_closing.vocabulary", "loop_closing.place_model",
+                                            "dynamic.model"};
+
+// Makes each relative path key absolute against `dir` when the file exists there (see load()); keys in
+// `skip` are left alone.
+void resolve_relative_paths(SystemConfig& config, const std::filesystem::path& dir,
+                            const std::vector<std::string>& skip = {});
 
 track::DepthModel depth_model_from_yaml(const ConfigReader& r);
 
