@@ -15,6 +15,12 @@
 #include "stillpoint/io/tum_sequence.hpp"
 #include "stillpoint/pipeline/runner.hpp"
 #include "stillpoint/pipeline/slam_system.hpp"
+#ifdef SP_HAVE_LIVE_VIEW
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "stillpoint/report/live_view.hpp"
+#endif
 
 namespace sp::app {
 
@@ -69,11 +75,83 @@ struct RunArgs {
   std::string load_map;
   bool dense_cloud = false;
   std::vector<std::string> overrides;  // --set section.key=value
+  int viewer_port = -1;                // --viewer [PORT]; -1 = no live view
 };
 
 // The data folder (config/, data/, models/) of this binary: $STILLPOINT_DATA_DIR, else share/stillpoint
 // beside the installed binary (or the build tree's link to the source tree), see common/data_dir.hpp.
 std::filesystem::path data_dir() { return resolve_data_dir(current_executable()); }
+
+#ifdef SP_HAVE_LIVE_VIEW
+std::string floats_base64(const std::vector<float>& v) {
+  return report::base64_encode(
+      std::string_view(reinterpret_cast<const char*>(v.data()), v.size() * sizeof(float)));
+}
+
+// Streams the run to a LiveViewServer (report/live_view.hpp): every pose, the map and keyframes after
+// each keyframe (and every 30 frames), the frame with its culled features every 3rd frame.
+void attach_live_view(report::LiveViewServer& server, pipeline::RunOptions& options) {
+  options.on_frame = [&server, frames = std::size_t{0}](const io::FrameData& f,
+                                                        const pipeline::FrameReport& r,
+                                                        pipeline::SlamSystem& system) mutable {
+    ++frames;
+    nlohmann::json pose = {
+        {"frame", f.index}, {"t", f.stamp}, {"state", track::to_string(r.state)}, {"culled", r.culled}};
+    if (r.T_wc) {
+      const auto& t = r.T_wc->translation();
+      const auto& q = r.T_wc->quaternion();
+      pose["p"] = {t.x(), t.y(), t.z()};
+      pose["q"] = {q.x(), q.y(), q.z(), q.w()};
+    }
+    server.publish("pose", pose.dump());
+    if (server.clients() == 0) return;  // the rest is only worth its cost when someone watches
+    if (r.keyframe || frames % 30 == 0) {
+      std::vector<float> points, keyframes;
+      for (const auto& p : system.map_point_positions(30000))
+        points.insert(points.end(), {p.x(), p.y(), p.z()});
+      for (const auto& k : system.keyframe_trajectory())
+        keyframes.insert(keyframes.end(), {static_cast<float>(k.t.x()), static_cast<float>(k.t.y()),
+                                           static_cast<float>(k.t.z())});
+      server.publish("map", nlohmann::json{{"points", floats_base64(points)},
+                                           {"count", points.size() / 3},
+                                           {"keyframes", floats_base64(keyframes)},
+                                           {"keyframe_count", keyframes.size() / 3}}
+                                .dump());
+    }
+    if (frames % 3 == 1 && !f.bgr.empty()) {
+      cv::Mat small;
+      const double scale = 320.0 / f.bgr.cols;
+      cv::resize(f.bgr, small, cv::Size(), scale, scale, cv::INTER_AREA);
+      for (const cv::Point2f& p : r.culled_points)
+        cv::circle(small, p * scale, 2, cv::Scalar(0, 0, 255), cv::FILLED);
+      std::vector<unsigned char> jpeg;
+      cv::imencode(".jpg", small, jpeg, {cv::IMWRITE_JPEG_QUALITY, 70});
+      server.publish("overlay",
+                     nlohmann::json{{"jpeg", report::base64_encode(std::string_view(
+                                                 reinterpret_cast<const char*>(jpeg.data()), jpeg.size()))},
+                                    {"culled", r.culled}}
+                         .dump());
+    }
+  };
+  options.on_finish = [&server](pipeline::SlamSystem& system) {
+    std::vector<float> points, keyframes;
+    for (const auto& p : system.map_point_positions(30000))
+      points.insert(points.end(), {p.x(), p.y(), p.z()});
+    for (const auto& k : system.keyframe_trajectory())
+      keyframes.insert(keyframes.end(), {static_cast<float>(k.t.x()), static_cast<float>(k.t.y()),
+                                         static_cast<float>(k.t.z())});
+    server.publish("map", nlohmann::json{{"points", floats_base64(points)},
+                                         {"count", points.size() / 3},
+                                         {"keyframes", floats_base64(keyframes)},
+                                         {"keyframe_count", keyframes.size() / 3}}
+                              .dump());
+    const auto stats = system.statistics();
+    server.publish("end", nlohmann::json{{"frames", stats.value("frames", 0)},
+                                         {"tracked", stats.value("tracked_frames", 0)}}
+                              .dump());
+  };
+}
+#endif
 
 // Which of the paper's parts ran: culling mode and detector model, keyframe policy, loop detector.
 void print_methods(const nlohmann::json& s) {
@@ -152,6 +230,18 @@ int run(const RunArgs& args) {
   if (!args.load_map.empty()) options.load_map = args.load_map;
   if (!args.save_map.empty()) options.save_map = args.save_map;
   options.dense_cloud = args.dense_cloud;
+#ifdef SP_HAVE_LIVE_VIEW
+  std::unique_ptr<report::LiveViewServer> live;
+  if (args.viewer_port >= 0) {
+    live = std::make_unique<report::LiveViewServer>(args.viewer_port, report::viewer_assets());
+    attach_live_view(*live, options);
+    fmt::print("live view: http://127.0.0.1:{}/ (open it in a browser; Ctrl-C stops the run)\n",
+               live->port());
+    std::fflush(stdout);
+  }
+#else
+  if (args.viewer_port >= 0) throw Error("--viewer: this stillpoint was built without the report module");
+#endif
   options.extra_stats["dataset"] = dataset.string();
   options.extra_stats["config"] = config_file.string();
   if (!args.overrides.empty()) options.extra_stats["config_overrides"] = args.overrides;
@@ -224,6 +314,11 @@ void add_run_command(CLI::App& app) {
                   "Relocalise in this saved map and extend it (instead of starting a new map)");
   cmd->add_option("--set", args->overrides,
                   "Override a configuration key, e.g. --set dynamic.detector_interval=1 (repeatable)");
+  cmd->add_option(
+         "--viewer", args->viewer_port,
+         "Live 3-D view while it runs: serve it on http://127.0.0.1:PORT/ (default 8765; 0 = any free port)")
+      ->expected(0, 1)
+      ->default_str("8765");
   cmd->add_option("--keyframe-policy", args->keyframe_policy, "heuristic|adaptive")
       ->check(CLI::IsMember({"heuristic", "adaptive"}));
   cmd->callback([args] {

@@ -108,6 +108,7 @@ RunResult run_slam(io::FrameSource& source, const SystemConfig& config, const Ru
   std::size_t lost = 0;
   bool interrupted = false;
   nlohmann::json rss_timeline = nlohmann::json::array();  // [frames done, current RSS MiB]
+  auto on_frame = options.on_frame;
   try {
     while (true) {
       if (options.stop != nullptr && options.stop->load()) {
@@ -120,6 +121,14 @@ RunResult run_slam(io::FrameSource& source, const SystemConfig& config, const Ru
       system.times().add("load", load.elapsed_ms());
       if (!data) break;
       const FrameReport report = system.process(*data);
+      if (on_frame) {
+        try {
+          on_frame(*data, report, system);
+        } catch (const std::exception& e) {
+          spdlog::warn("frame observer failed, dropped: {}", e.what());
+          on_frame = nullptr;
+        }
+      }
       if (report.state == track::TrackingState::Lost) ++lost;
       ++done;
       if (options.rss_every_frames != 0 && done % options.rss_every_frames == 0) {
@@ -136,6 +145,13 @@ RunResult run_slam(io::FrameSource& source, const SystemConfig& config, const Ru
   }
   bar.finish();
   system.finish();
+  if (options.on_finish) {
+    try {
+      options.on_finish(system);
+    } catch (const std::exception& e) {
+      spdlog::warn("finish observer failed: {}", e.what());
+    }
+  }
   if (options.rss_every_frames != 0) rss_timeline.push_back({done, current_rss_mib()});
   if (options.save_map) {
     // After finish(): local mapping and loop closing have drained, so the map is final.

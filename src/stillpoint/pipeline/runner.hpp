@@ -4,6 +4,7 @@
 // a plot. Outputs are written also when the run stops early (error, Ctrl-C).
 #include <atomic>
 #include <filesystem>
+#include <functional>
 #include <nlohmann/json.hpp>
 #include <optional>
 
@@ -11,6 +12,9 @@
 #include "stillpoint/pipeline/system_config.hpp"
 
 namespace sp::pipeline {
+
+class SlamSystem;
+struct FrameReport;
 
 struct RunOptions {
   std::filesystem::path out_dir;
@@ -31,6 +35,11 @@ struct RunOptions {
   // [frames done, MiB] (plus one sample after the stages have drained); 0 = off. scripts/soak.sh
   // reads it to check that memory stays flat over a long run.
   std::size_t rss_every_frames = 100;
+  // Called on the tracking thread after each frame (the live view, `run --viewer`); an exception
+  // from it is logged and the observer dropped, the run goes on.
+  std::function<void(const io::FrameData&, const FrameReport&, SlamSystem&)> on_frame;
+  // Called once after the stages have drained, before the outputs are written.
+  std::function<void(SlamSystem&)> on_finish;
 };
 
 struct RunResult {

@@ -270,6 +270,9 @@ FrameReport SlamSystem::process(const io::FrameData& data) {
     dynamic = std::move(culled.drop);
     suspect = std::move(culled.suspect);
   }
+  std::vector<cv::Point2f> culled_points;
+  for (std::size_t i = 0; i < dynamic.size() && i < features.keypoints.size(); ++i)
+    if (dynamic[i]) culled_points.push_back(features.keypoints[i].pt);
   artifacts_.on_frame(data, features.keypoints, dynamic, culled.result.boxes, culled.result.box_dynamic);
   if (culling_score_) culling_score_->add(data.rgb_path, features.keypoints, dynamic);
   track::Frame frame = frontend_.assemble(data, std::move(features), dynamic, suspect);
@@ -293,7 +296,8 @@ FrameReport SlamSystem::process(const io::FrameData& data) {
                      frame.culled,
                      outcome.new_keyframe != map::kNoKeyframe,
                      outcome.new_keyframe,
-                     std::nullopt};
+                     std::nullopt,
+                     std::move(culled_points)};
   if (outcome.state == track::TrackingState::Ok && frame.has_pose) report.T_wc = frame.T_cw.inverse();
   return report;
 }
@@ -325,6 +329,21 @@ std::vector<io::StampedPose> SlamSystem::keyframe_trajectory() {
     const map::Keyframe* kf = view.keyframe(id);
     out.push_back(to_stamped(kf->stamp, kf->T_cw.inverse()));
   }
+  return out;
+}
+
+std::vector<Eigen::Vector3f> SlamSystem::map_point_positions(std::size_t max) {
+  std::vector<Eigen::Vector3f> all;
+  {
+    map::MapView view = map_.view();
+    all.reserve(view.points().size());
+    for (const auto& [id, p] : view.points())
+      if (!p.bad) all.push_back(p.position.cast<float>());
+  }
+  if (max == 0 || all.size() <= max) return all;
+  std::vector<Eigen::Vector3f> out;
+  out.reserve(max);
+  for (std::size_t k = 0; k < max; ++k) out.push_back(all[k * all.size() / max]);
   return out;
 }
 

@@ -33,6 +33,7 @@ struct FrameReport {
   // The frame's camera pose as tracked (T_world_camera), when the tracker gave one (state Ok). Later
   // map corrections move it; trajectory() resolves every pose against the corrected map.
   std::optional<geo::SE3> T_wc;
+  std::vector<cv::Point2f> culled_points;  // image positions of the features dropped as dynamic
 };
 
 // Whether this build has ParC_NetVLAD (libtorch): without it the 'netvlad' loop detector is refused.
@@ -69,6 +70,8 @@ class SlamSystem {
 
   [[nodiscard]] std::vector<io::StampedPose> trajectory();
   [[nodiscard]] std::vector<io::StampedPose> keyframe_trajectory();
+  // Positions of the live map points, at most `max` (evenly subsampled), for a live view.
+  [[nodiscard]] std::vector<Eigen::Vector3f> map_point_positions(std::size_t max);
   [[nodiscard]] nlohmann::json statistics();
   // Loops closed so far (empty without loop closing).
   [[nodiscard]] std::vector<loop::LoopClosure> loop_closures() const;
