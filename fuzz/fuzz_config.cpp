@@ -1,6 +1,7 @@
 // libFuzzer target: YAML configuration through sp::ConfigReader (from text and from a file), the
-// camera config (every key typed and range-checked) and generic section/read/finish use as the
-// system config does. Only sp::Error may escape.
+// camera config (every key typed and range-checked; from a file also the ORB-SLAM2/3 and stella_vslam
+// layouts load_camera_config recognises) and generic section/read/finish use as the system config
+// does. Only sp::Error may escape.
 #include <cstdlib>
 
 #include "fuzz_util.hpp"
@@ -48,6 +49,11 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   sp::fuzz::write_file(file, data, size);
   try {
     exercise(sp::ConfigReader::from_file(file));
+  } catch (const sp::Error&) {
+  }
+  try {
+    const auto c = sp::io::load_camera_config(file);  // any camera format
+    if (c.intrinsics.width < 1 || !(c.intrinsics.fx > 0) || !(c.depth_factor > 0)) std::abort();
   } catch (const sp::Error&) {
   }
   return 0;
