@@ -52,4 +52,15 @@ assert s["tracked_frames"] > 0, "FAILED: the installed CLI tracked nothing"
 print("installed CLI: data from the prefix,", s["tracked_frames"], "frames tracked")
 PY
 [ -s "$work/run/trajectory_kitti.txt" ] || { echo "FAILED: no KITTI trajectory"; exit 1; }
+
+# The installed Python module (when built) loads libstillpoint.so through its RPATH and finds the
+# prefix's data from where it lies.
+if module=$(ls "$prefix"/lib*/python3/dist-packages/stillpoint*.so 2>/dev/null); then
+  py=python3
+  [ -x /usr/bin/python3 ] && py=/usr/bin/python3  # the interpreter Debian's pybind11 build targets
+  found=$(PYTHONPATH=$(dirname "$module") "$py" -c "import stillpoint; print(stillpoint.data_dir())")
+  [ "$(realpath "$found")" = "$(realpath "$prefix/share/stillpoint")" ] \
+    || { echo "FAILED: installed Python module finds data in $found"; exit 1; }
+  echo "installed Python module: data from the prefix"
+fi
 echo "install_consumer: all checks passed"
