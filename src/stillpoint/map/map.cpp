@@ -248,7 +248,19 @@ int MapView::tracked_points(KeyframeId kid, int min_observations) const {
     if (pid == kNoPoint) continue;
     const auto pit = map_.points_.find(pid);
     if (pit == map_.points_.end() || pit->second.bad) continue;
-    if (static_cast<int>(pit->second.observations.size()) >= min_observations) ++n;
+    if (weighted_observations(pit->second) >= min_observations) ++n;
+  }
+  return n;
+}
+
+int MapView::weighted_observations(const MapPoint& p) const {
+  int n = 0;
+  for (const auto& [kid, feature] : p.observations) {
+    const auto kit = map_.keyframes_.find(kid);
+    if (kit == map_.keyframes_.end()) continue;
+    const auto& u_right = kit->second.features.u_right;
+    const auto f = static_cast<std::size_t>(feature);
+    n += f < u_right.size() && u_right[f] >= 0 ? 2 : 1;
   }
   return n;
 }

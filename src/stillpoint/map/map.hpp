@@ -42,7 +42,11 @@ class MapView {
 
   [[nodiscard]] std::vector<KeyframeId> best_covisibles(KeyframeId kf, std::size_t n) const;
   [[nodiscard]] std::vector<KeyframeId> covisibles_with_weight(KeyframeId kf, int min_weight) const;
+  // Points of kf with at least min_observations weighted observations (see weighted_observations).
   [[nodiscard]] int tracked_points(KeyframeId kf, int min_observations) const;
+  // Observations of p with one counted twice where the keyframe has depth at the feature: a depth
+  // reading is a second view (ORB-SLAM's convention for stereo and RGB-D observations).
+  [[nodiscard]] int weighted_observations(const MapPoint& p) const;
 
   [[nodiscard]] const std::unordered_map<KeyframeId, Keyframe>& keyframes() const;
   [[nodiscard]] const std::unordered_map<PointId, MapPoint>& points() const;

@@ -1,5 +1,7 @@
 #include "stillpoint/mapping/local_mapper.hpp"
 
+#include <spdlog/spdlog.h>
+
 #include <algorithm>
 #include <cmath>
 #include <set>
@@ -20,8 +22,10 @@ LocalMappingConfig LocalMappingConfig::from_yaml(const ConfigReader& r) {
   r.read("redundancy", c.redundancy, 0.5, 1.0);
   r.read("cull_keyframes", c.cull_keyframes);
   r.read("min_found_ratio", c.min_found_ratio, 0.0, 1.0);
+  r.read("min_weighted_observations", c.min_weighted_observations, 1, 100);
   r.read("purge_after_keyframes", c.purge_after_keyframes, std::size_t{1}, std::size_t{100000});
   c.ba = opt::BAConfig::from_yaml(r.section("bundle_adjustment"));
+  c.triangulation = TriangulationConfig::from_yaml(r.section("triangulation"));
   return c;
 }
 
@@ -32,7 +36,8 @@ LocalMapper::LocalMapper(map::Map& map, LocalMappingConfig config, geo::CameraIn
       camera_(camera),
       depth_(depth),
       pyramid_(std::move(pyramid)),
-      camera_model_{camera.fx, camera.fy, camera.cx, camera.cy, depth.bf} {}
+      camera_model_{camera.fx, camera.fy, camera.cx, camera.cy, depth.bf},
+      triangulator_(config_.triangulation, camera, depth.bf, pyramid_) {}
 
 LocalMappingStats LocalMapper::process(map::KeyframeId kid, const std::atomic<bool>* abort) {
   LocalMappingStats stats;
@@ -41,6 +46,15 @@ LocalMappingStats LocalMapper::process(map::KeyframeId kid, const std::atomic<bo
     if (view.keyframe(kid) == nullptr || view.keyframe(kid)->bad) return stats;
     integrate(view, kid);
     stats.culled_points = cull_recent_points(view, kid);
+  }
+  if (config_.triangulation.enabled) {
+    Stopwatch watch;
+    stats.triangulated_points = create_new_points(kid);
+    stats.triangulation_ms = watch.elapsed_ms();
+  }
+  {
+    map::MapView view = map_.view();
+    if (view.keyframe(kid) == nullptr || view.keyframe(kid)->bad) return stats;
     stats.fused_points = fuse_neighbours(view, kid);
   }
   if (config_.local_ba) local_bundle_adjustment(kid, abort, stats);
@@ -72,7 +86,10 @@ int LocalMapper::cull_recent_points(map::MapView& view, map::KeyframeId kid) {
     if (p == nullptr || p->bad) continue;
     // Keyframe ids grow by one per keyframe, so the id gap counts keyframes since the point's birth.
     const auto age = kid - p->first_keyframe;
-    if (p->found_ratio() < config_.min_found_ratio || (age >= 2 && p->observations.size() < 2)) {
+    // Two keyframes after its birth a point must have been seen again: weighted observations count a
+    // view with depth twice, so 3 = its own depth view plus one more, or three views without depth.
+    if (p->found_ratio() < config_.min_found_ratio ||
+        (age >= 2 && view.weighted_observations(*p) < config_.min_weighted_observations)) {
       view.erase_point(pid);
       ++culled;
     } else if (age < 3) {
@@ -81,6 +98,76 @@ int LocalMapper::cull_recent_points(map::MapView& view, map::KeyframeId kid) {
   }
   recent_points_ = std::move(keep);
   return culled;
+}
+
+int LocalMapper::create_new_points(map::KeyframeId kid) {
+  struct Snapshot {
+    map::KeyframeId id;
+    map::FeatureSet features;  // descriptors share the keyframe's (immutable) buffer
+    TriangulationView view;
+  };
+  std::vector<Snapshot> snaps;
+  {
+    map::MapView view = map_.view();
+    std::vector<map::KeyframeId> ids{kid};
+    for (map::KeyframeId n : view.best_covisibles(kid, config_.triangulation.neighbours)) ids.push_back(n);
+    snaps.reserve(ids.size());
+    for (map::KeyframeId id : ids) {
+      const map::Keyframe* kf = view.keyframe(id);
+      if (kf == nullptr || kf->bad || kf->features.size() != kf->points.size()) continue;
+      Snapshot& s = snaps.emplace_back(Snapshot{id, kf->features, {}});
+      s.view.T_cw = kf->T_cw;
+      s.view.free.resize(kf->points.size());
+      for (std::size_t i = 0; i < kf->points.size(); ++i) {
+        const map::MapPoint* p = kf->points[i] == map::kNoPoint ? nullptr : view.live_point(kf->points[i]);
+        s.view.free[i] = p == nullptr;
+      }
+    }
+  }
+  if (snaps.size() < 2 || snaps.front().id != kid) return 0;
+  for (Snapshot& s : snaps) s.view.features = &s.features;
+
+  struct NewPoint {
+    map::KeyframeId other;
+    TriangulatedPoint point;
+  };
+  std::vector<NewPoint> found;
+  TriangulationView& first = snaps.front().view;
+  for (std::size_t k = 1; k < snaps.size(); ++k) {
+    const std::vector<TriangulatedPoint> pair_points = triangulator_.triangulate(first, snaps[k].view);
+    spdlog::debug("triangulation: keyframe {} with {}: {} free / {} free features, {} new points", kid,
+                  snaps[k].id, std::count(first.free.begin(), first.free.end(), true),
+                  std::count(snaps[k].view.free.begin(), snaps[k].view.free.end(), true), pair_points.size());
+    for (const TriangulatedPoint& p : pair_points) {
+      first.free[static_cast<std::size_t>(p.feature1)] = false;  // best covisibles claim features first
+      found.push_back({snaps[k].id, p});
+    }
+  }
+
+  int created = 0;
+  map::MapView view = map_.view();
+  for (const NewPoint& n : found) {
+    map::Keyframe* kf1 = view.keyframe(kid);
+    map::Keyframe* kf2 = view.keyframe(n.other);
+    if (kf1 == nullptr || kf1->bad || kf2 == nullptr || kf2->bad) continue;
+    const auto i1 = static_cast<std::size_t>(n.point.feature1);
+    const auto i2 = static_cast<std::size_t>(n.point.feature2);
+    // Tracking or fusion may have matched either feature since the copy.
+    if (kf1->points[i1] != map::kNoPoint || kf2->points[i2] != map::kNoPoint) continue;
+    map::MapPoint p;
+    p.position = n.point.position;
+    p.descriptor = kf1->features.descriptors.row(n.point.feature1).clone();
+    p.reference = kid;
+    p.first_keyframe = kid;
+    const map::PointId pid = view.add_point(std::move(p));
+    view.add_observation(pid, kid, n.point.feature1);
+    view.add_observation(pid, n.other, n.point.feature2);
+    view.update_point_descriptor(pid);
+    view.update_point_normal_and_depth(pid, pyramid_);
+    recent_points_.push_back(pid);
+    ++created;
+  }
+  return created;
 }
 
 int LocalMapper::fuse_neighbours(map::MapView& view, map::KeyframeId kid) {

@@ -8,6 +8,7 @@
 #include "stillpoint/common/config_reader.hpp"
 #include "stillpoint/geometry/camera.hpp"
 #include "stillpoint/map/map.hpp"
+#include "stillpoint/mapping/point_triangulator.hpp"
 #include "stillpoint/optimize/bundle_adjustment.hpp"
 #include "stillpoint/tracking/frame.hpp"
 
@@ -21,10 +22,14 @@ struct LocalMappingConfig {
   double redundancy = 0.9;            // share of a keyframe's points seen by 3 others -> culled
   bool cull_keyframes = true;
   double min_found_ratio = 0.25;  // new points matched less often than this are dropped
+  // New points with fewer weighted observations (a view with depth counts 2) two keyframes after
+  // their birth are dropped; ORB-SLAM RGB-D drops those with <= 3, i.e. asks for 4.
+  int min_weighted_observations = 3;
   // Culled points and keyframes are freed this many keyframes after they went bad (ids other stages
   // hold across views resolve until then); keeps memory flat on long runs.
   std::size_t purge_after_keyframes = 20;
   opt::BAConfig ba;
+  TriangulationConfig triangulation;
   static LocalMappingConfig from_yaml(const ConfigReader& r);
 };
 
@@ -32,6 +37,8 @@ struct LocalMappingStats {
   double ba_ms = 0;
   int culled_points = 0;
   int fused_points = 0;
+  int triangulated_points = 0;
+  double triangulation_ms = 0;
   int culled_keyframes = 0;
   std::size_t purged_records = 0;
   bool ba_aborted = false;
@@ -48,6 +55,9 @@ class LocalMapper {
  private:
   void integrate(map::MapView& view, map::KeyframeId kid);
   int cull_recent_points(map::MapView& view, map::KeyframeId kid);
+  // New points from features no keyframe had mapped, matched with the best covisibles (lock-free
+  // matching on copies; the map is locked only to copy and to write back).
+  int create_new_points(map::KeyframeId kid);
   int fuse_neighbours(map::MapView& view, map::KeyframeId kid);
   bool local_bundle_adjustment(map::KeyframeId kid, const std::atomic<bool>* abort, LocalMappingStats& stats);
   int cull_keyframes(map::MapView& view, map::KeyframeId kid);
@@ -58,6 +68,7 @@ class LocalMapper {
   track::DepthModel depth_;
   map::ScalePyramid pyramid_;
   opt::CameraModel camera_model_;
+  PointTriangulator triangulator_;
   std::vector<map::PointId> recent_points_;
 };
 

@@ -31,6 +31,7 @@ class LocalMappingStage final : public ThreadedStage<map::KeyframeId> {
     const auto stats = mapper_.process(kf, &abort_ba_);
     times_.add("local_map", watch.elapsed_ms());
     if (stats.ba_ms > 0) times_.add("ba", stats.ba_ms);
+    if (stats.triangulation_ms > 0) times_.add("triangulation", stats.triangulation_ms);
     ++processed_;
     if (downstream_) downstream_(kf);
   }
