@@ -99,6 +99,22 @@ TEST(ViewingAngle, MatchesKnownRotationAboutThePoint) {
   }
 }
 
+TEST(ViewingAngle, FromTheMeanViewingDirection) {
+  // Two keyframes seeing the point from +-20 deg about the z axis: the mean direction is the z axis,
+  // so a camera on that axis has changed nothing, one rotated 50 deg about the point has changed 50.
+  const Eigen::Vector3d p(0.0, 0.0, 3.0);
+  const auto centre_at = [&](double deg) {
+    return Eigen::Vector3d(p + Eigen::AngleAxisd(deg * M_PI / 180.0, Eigen::Vector3d::UnitY()) *
+                                   Eigen::Vector3d(0.0, 0.0, -3.0));
+  };
+  const Eigen::Vector3d normal =
+      ((p - centre_at(20.0)).normalized() + (p - centre_at(-20.0)).normalized()).normalized();
+  EXPECT_NEAR(angle_from_normal_deg(p, normal, centre_at(0.0)), 0.0, 1e-9);
+  EXPECT_NEAR(angle_from_normal_deg(p, normal, centre_at(50.0)), 50.0, 1e-9);
+  // Against the first keyframe alone the same camera changed 30 deg: the readings differ.
+  EXPECT_NEAR(viewing_angle_change_deg(p, centre_at(20.0), centre_at(50.0)), 30.0, 1e-9);
+}
+
 TEST(EffectiveGrid, CountsOnlyPointsBeyondThe30DegreeRule) {
   std::vector<ViewChange> changes = {
       {10, 10, 31.0f},    // top-left, effective

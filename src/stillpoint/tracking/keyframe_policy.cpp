@@ -21,6 +21,7 @@ KeyframePolicyConfig KeyframePolicyConfig::from_yaml(const ConfigReader& r) {
   r.read("close_untracked_min", c.close_untracked_min, 0, 10000);
   r.read("max_mapping_queue", c.max_mapping_queue, std::size_t{1}, std::size_t{100});
   r.read("effective_angle_deg", c.effective_angle_deg, 1.0, 90.0);
+  r.read_choice("effective_reference", c.effective_reference, {"keyframe", "point"});
   r.read("effective_share", c.effective_share, 0.0, 1.0);
   r.read("effective_min", c.effective_min, 0, 10000);
   return c;
@@ -192,6 +193,12 @@ double viewing_angle_change_deg(const Eigen::Vector3d& point, const Eigen::Vecto
   const Eigen::Vector3d b = (point - center_now).normalized();
   // atan2 of |a x b| and a.b stays accurate for tiny and near-180 degree angles.
   return std::atan2(a.cross(b).norm(), a.dot(b)) * 180.0 / M_PI;
+}
+
+double angle_from_normal_deg(const Eigen::Vector3d& point, const Eigen::Vector3d& normal,
+                             const Eigen::Vector3d& center_now) {
+  const Eigen::Vector3d b = (point - center_now).normalized();
+  return std::atan2(normal.cross(b).norm(), normal.dot(b)) * 180.0 / M_PI;
 }
 
 Eigen::Matrix3i effective_point_grid(const std::vector<ViewChange>& changes, int width, int height,

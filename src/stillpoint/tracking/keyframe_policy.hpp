@@ -42,8 +42,11 @@ struct KeyframePolicyConfig {
   std::size_t max_mapping_queue = 3;  // keyframes waiting in local mapping before insertion pauses
   // Adaptive policy (paper §III-A).
   double effective_angle_deg = 30.0;  // a point is "effective" once its viewing angle changed this much
-  double effective_share = 0.25;      // effective points needed, as a share of the tracked inliers
-  int effective_min = 20;             // ... and never fewer than this
+  // What the angle is measured against: "keyframe" = the ray from the reference keyframe's centre;
+  // "point" = the point's mean viewing direction over every keyframe that saw it (docs/keyframe_policy.md).
+  std::string effective_reference = "keyframe";
+  double effective_share = 0.25;  // effective points needed, as a share of the tracked inliers
+  int effective_min = 20;         // ... and never fewer than this
   static KeyframePolicyConfig from_yaml(const ConfigReader& r);
 };
 
@@ -70,6 +73,10 @@ struct GridBalance {
   [[nodiscard]] bool spread_out() const { return t2 > t1; }
 };
 GridBalance grid_balance(const Eigen::Matrix3i& counts);
+// Angle (degrees) between a point's mean viewing direction `normal` (unit, keyframe -> point) and the
+// ray from center_now to the point.
+double angle_from_normal_deg(const Eigen::Vector3d& point, const Eigen::Vector3d& normal,
+                             const Eigen::Vector3d& center_now);
 // Angle (degrees) between the rays from two camera centres to a point: how much its view changed.
 double viewing_angle_change_deg(const Eigen::Vector3d& point, const Eigen::Vector3d& center_ref,
                                 const Eigen::Vector3d& center_now);
