@@ -114,6 +114,11 @@ void LoopCloser::add_existing_keyframes(const std::vector<KeyframeInfo>& keyfram
   for (const KeyframeInfo& kf : keyframes) detector_->add_keyframe(kf);
 }
 
+void LoopCloser::erase_keyframes(const std::vector<map::KeyframeId>& keyframes) {
+  if (!detector_) return;
+  for (map::KeyframeId id : keyframes) detector_->erase_keyframe(id);
+}
+
 void LoopCloser::process(map::KeyframeId kid) {
   if (!detector_) return;
   KeyframeInfo info;
@@ -161,6 +166,7 @@ void LoopCloser::process(map::KeyframeId kid) {
     stats_.global_ms_total += global_ms;
     stats_.candidates += candidates.size();
   }
+  if (filed_) filed_(kid, info.bow);
   handle_candidates(candidates, kid);
 }
 

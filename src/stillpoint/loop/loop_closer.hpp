@@ -71,6 +71,14 @@ class LoopCloser {
   void set_global_describer(GlobalDescriber describe) { describe_ = std::move(describe); }
   [[nodiscard]] bool needs_global_descriptors() const { return detector_ && detector_->name() == "netvlad"; }
 
+  // Called on the loop-closing thread with each keyframe's BoW vector once the detector has filed it
+  // (before verification), so other users of the vector (the relocalisation database) need not
+  // compute it again. Set before the first process().
+  using KeyframeFiled = std::function<void(map::KeyframeId, const BowVector&)>;
+  void set_keyframe_filed(KeyframeFiled filed) { filed_ = std::move(filed); }
+  // Forgets keyframes the map has culled (any thread): they are no longer loop candidates.
+  void erase_keyframes(const std::vector<map::KeyframeId>& keyframes);
+
   // Handles one new keyframe (called in keyframe order by the loop-closing stage).
   void process(map::KeyframeId keyframe);
   // Files the keyframes of a loaded map (BoW already computed, in id order) without detection, so
@@ -105,6 +113,7 @@ class LoopCloser {
   bool deterministic_;
   std::unique_ptr<LoopDetector> detector_;
   GlobalDescriber describe_;
+  KeyframeFiled filed_;
   std::size_t last_loop_keyframe_ = 0;
 
   mutable std::mutex stats_mutex_;

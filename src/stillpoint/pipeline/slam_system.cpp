@@ -71,8 +71,35 @@ SlamSystem::SlamSystem(SystemConfig config, io::CameraConfig camera, const Syste
     if (closer_->needs_global_descriptors()) attach_place_model(options.project_root);
     loop_stage_ = std::make_unique<LoopClosingStage>(*closer_, times_, config_.pipeline.loop_queue);
   }
-  LocalMappingStage::Downstream downstream;
-  if (loop_stage_) downstream = [this](map::KeyframeId kf) { loop_stage_->submit(kf); };
+  // Relocalisation wants a vocabulary even when loop detection is off.
+  if (!vocabulary_) {
+    std::filesystem::path vocab_file = config_.loop.vocabulary;
+    if (vocab_file.is_relative()) vocab_file = options.project_root / vocab_file;
+    try {
+      Stopwatch load;
+      vocabulary_ = std::make_shared<const loop::Vocabulary>(loop::Vocabulary::load(vocab_file));
+      vocabulary_load_ms_ = load.elapsed_ms();
+      vocabulary_words_ = vocabulary_->size();
+      vocabulary_file_ = vocab_file;
+    } catch (const Error& e) {
+      spdlog::warn("no vocabulary for relocalisation ({}): candidates are the recent keyframes", e.what());
+    }
+  }
+  if (vocabulary_) attach_relocalization_index();
+  LocalMappingStage::Downstream downstream = [this](map::KeyframeId kf) {
+    if (reloc_index_ && !closer_) {
+      // No loop closing to compute the vector: local mapping's thread does (ORB-SLAM computes it there).
+      cv::Mat descriptors;
+      {
+        map::MapView view = map_.view();
+        const map::Keyframe* k = view.keyframe(kf);
+        if (k != nullptr && !k->bad) descriptors = k->features.descriptors.clone();
+      }
+      if (!descriptors.empty()) reloc_index_->add(kf, reloc_index_->describe(descriptors));
+    }
+    erase_culled_keyframes();
+    if (loop_stage_) loop_stage_->submit(kf);
+  };
   mapping_stage_ =
       std::make_unique<LocalMappingStage>(mapper_, times_, downstream, config_.pipeline.mapping_queue);
   if (!deterministic_) {
@@ -82,6 +109,32 @@ SlamSystem::SlamSystem(SystemConfig config, io::CameraConfig camera, const Syste
 }
 
 SlamSystem::~SlamSystem() { finish(); }
+
+void SlamSystem::attach_relocalization_index() {
+  reloc_index_ = std::make_unique<RelocalizationIndex>(vocabulary_);
+  if (closer_) {
+    closer_->set_keyframe_filed([this](map::KeyframeId kf, const loop::BowVector& bow) {
+      reloc_index_->add(kf, bow);
+      // Culled while its vector was computed: the scan after local mapping may have missed it.
+      erase_culled_keyframes();
+    });
+  }
+  tracker_.set_relocalization_candidates(
+      [index = reloc_index_.get(), n = config_.tracker.relocalization_candidates](map::MapView&,
+                                                                                  const track::Frame& frame) {
+        return index->candidates(frame.features.descriptors, n);
+      });
+}
+
+void SlamSystem::erase_culled_keyframes() {
+  if (!reloc_index_) return;
+  std::vector<map::KeyframeId> culled;
+  {
+    map::MapView view = map_.view();
+    culled = reloc_index_->erase_culled(view);
+  }
+  if (closer_ && !culled.empty()) closer_->erase_keyframes(culled);
+}
 
 void SlamSystem::attach_place_model([[maybe_unused]] const std::filesystem::path& project_root) {
 #ifdef SP_HAVE_PLACE
@@ -144,18 +197,6 @@ void SlamSystem::load_map(const std::filesystem::path& file) {
         fmt::format("the map was built with an ORB pyramid of {} levels x {}, the configuration has {} x {}",
                     info.pyramid_levels, info.pyramid_scale_factor, pyramid.levels, pyramid.scale_factor));
   }
-  // Relocalisation wants a vocabulary even when loop detection is off.
-  if (!vocabulary_) {
-    std::filesystem::path vocab_file = config_.loop.vocabulary;
-    if (vocab_file.is_relative()) vocab_file = project_root_ / vocab_file;
-    try {
-      vocabulary_ = std::make_shared<const loop::Vocabulary>(loop::Vocabulary::load(vocab_file));
-      vocabulary_file_ = vocab_file;
-    } catch (const Error& e) {
-      spdlog::warn("no vocabulary for relocalisation ({}): candidates are ranked by whole-image similarity",
-                   e.what());
-    }
-  }
   if (vocabulary_ && !info.vocabulary_name.empty()) {
     const std::uint64_t checksum = map::vocabulary_fingerprint(vocabulary_file_);
     if (checksum != info.vocabulary_checksum || vocabulary_->size() != info.vocabulary_words) {
@@ -183,28 +224,18 @@ void SlamSystem::load_map(const std::filesystem::path& file) {
   tracker_.start_in_existing_map();
   Stopwatch bow_watch;
   std::string candidates = "thumbnail";
-  if (vocabulary_) {
-    reloc_db_ = std::make_unique<loop::KeyframeDatabase>();
+  if (reloc_index_) {
     for (loop::KeyframeInfo& k : keyframes) {
       cv::Mat descriptors;
       {
         map::MapView view = map_.view();
         descriptors = view.keyframe(k.id)->features.descriptors;
       }
-      k.bow = vocabulary_->transform(descriptors);
-      reloc_db_->add(k.id, k.bow);
+      k.bow = reloc_index_->describe(descriptors);
+      reloc_index_->add(k.id, k.bow);
     }
     if (closer_) closer_->add_existing_keyframes(keyframes);
     candidates = "bow";
-    tracker_.set_relocalization_candidates(
-        [vocabulary = vocabulary_, db = reloc_db_.get(), n = config_.tracker.relocalization_candidates](
-            map::MapView&, const track::Frame& frame) {
-          // ORB-SLAM's relocalisation query: keyframes sharing at least 80 % of the most shared words.
-          const auto hits = db->query(vocabulary->transform(frame.features.descriptors), 0.8);
-          std::vector<map::KeyframeId> out;
-          for (std::size_t i = 0; i < hits.size() && i < n; ++i) out.push_back(hits[i].id);
-          return out;
-        });
   } else {
     tracker_.set_relocalization_candidates(
         [n = config_.tracker.relocalization_candidates](map::MapView& view, const track::Frame& frame) {
@@ -357,6 +388,24 @@ nlohmann::json SlamSystem::statistics() {
   j["tracked_frames"] = tracker_.trajectory().size();
   j["lost_frames"] = tracker_.lost_frames();
   j["relocalizations"] = tracker_.relocalizations();
+  {
+    const track::RelocalizationStats& r = tracker_.relocalization_stats();
+    nlohmann::json reloc = {{"attempts", r.attempts},
+                            {"candidates_tried", r.candidates_tried},
+                            {"poses_found", r.poses_found},
+                            {"accepted", r.accepted},
+                            {"rejected_by_consistency", r.rejected_by_consistency},
+                            {"verify_frames", config_.tracker.relocalization_verify_frames},
+                            {"database", reloc_index_ ? "bow" : "recent-keyframes"}};
+    if (reloc_index_) {
+      const RelocalizationIndexStats s = reloc_index_->stats();
+      reloc["database_keyframes"] = reloc_index_->size();
+      reloc["database_filed"] = s.filed;
+      reloc["database_erased"] = s.erased;
+      reloc["database_queries"] = s.queries;
+    }
+    j["relocalization"] = reloc;
+  }
   j["pose_guard"] = {{"jumps", tracker_.guard_stats().jumps},
                      {"resolved", tracker_.guard_stats().resolved},
                      {"keyframes_vetoed", tracker_.guard_stats().keyframes_vetoed}};

@@ -18,6 +18,7 @@
 #include "stillpoint/pipeline/frontend.hpp"
 #include "stillpoint/pipeline/local_mapping_stage.hpp"
 #include "stillpoint/pipeline/loop_closing_stage.hpp"
+#include "stillpoint/pipeline/relocalization_index.hpp"
 #include "stillpoint/pipeline/run_artifacts.hpp"
 #include "stillpoint/pipeline/system_config.hpp"
 
@@ -81,6 +82,12 @@ class SlamSystem {
   [[nodiscard]] bool failed() const;
 
  private:
+  // The BoW relocalisation database over every keyframe (when a vocabulary is available): filled as
+  // keyframes leave local mapping (loop closing computes their vectors when it runs), culled keyframes
+  // erased from it and from the loop detectors.
+  void attach_relocalization_index();
+  // Erases culled keyframes from the relocalisation database and the loop detectors.
+  void erase_culled_keyframes();
   // Loads the ParC_NetVLAD model and hands the loop closer its keyframe describer (netvlad detector).
   void attach_place_model(const std::filesystem::path& project_root);
   SystemConfig config_;
@@ -106,7 +113,7 @@ class SlamSystem {
   std::filesystem::path project_root_;
   std::shared_ptr<const loop::Vocabulary> vocabulary_;
   std::filesystem::path vocabulary_file_;
-  std::unique_ptr<loop::KeyframeDatabase> reloc_db_;  // loaded keyframes, for relocalisation
+  std::unique_ptr<RelocalizationIndex> reloc_index_;  // every keyframe, for relocalisation
   nlohmann::json map_file_stats_ = nlohmann::json::object();
   RunArtifacts artifacts_;
 };

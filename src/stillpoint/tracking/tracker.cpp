@@ -24,6 +24,9 @@ TrackerConfig TrackerConfig::from_yaml(const ConfigReader& r) {
   r.read("max_local_keyframes", c.max_local_keyframes, std::size_t{5}, std::size_t{1000});
   r.read("new_points_min", c.new_points_min, 0, 10000);
   r.read("relocalization_candidates", c.relocalization_candidates, std::size_t{1}, std::size_t{1000});
+  r.read("relocalization_verify_frames", c.relocalization_verify_frames, 0, 300);
+  r.read("relocalization_max_step_m", c.relocalization_max_step_m, 0.001, 10.0);
+  r.read("relocalization_max_step_deg", c.relocalization_max_step_deg, 0.01, 180.0);
   c.pose = opt::PoseOptimizerConfig::from_yaml(r.section("pose_optimizer"));
   c.keyframes = KeyframePolicyConfig::from_yaml(r.section("keyframes"));
   c.guard = PoseGuardConfig::from_yaml(r.section("pose_guard"));
@@ -76,22 +79,49 @@ TrackOutcome Tracker::track(Frame& frame, const MappingStatus& mapping) {
   } else {
     refresh_last_frame(view);
     bool ok = false;
+    bool by_motion = false;
     std::optional<geo::SE3> predicted;
     if (state_ == TrackingState::Ok && velocity_ && last_frame_.has_pose)
       predicted = *velocity_ * last_frame_.T_cw;
+    // While a relocalised pose is verified, the frame must land where its motion says: the
+    // constant-velocity prediction, or no motion on the first frame after the relocalisation.
+    const bool verifying = state_ == TrackingState::Ok && verify_left_ > 0 && last_frame_.has_pose;
+    const geo::SE3 expected = predicted ? *predicted : last_frame_.T_cw;
+    const bool motion_expected = velocity_.has_value();
+    bool relocalized = false;
     if (state_ == TrackingState::Ok) {
-      if (velocity_) ok = track_motion_model(view, frame);
+      if (velocity_) ok = by_motion = track_motion_model(view, frame);
       if (!ok) ok = track_reference_keyframe(view, frame);
     } else {
-      ok = relocalize(view, frame);
-      out.relocalized = ok;
+      ++reloc_stats_.attempts;
+      ok = relocalized = relocalize(view, frame);
     }
     if (ok) ok = track_local_map(view, frame);
+    if (ok && relocalized) {
+      ++reloc_stats_.poses_found;
+      out.relocalized = true;
+      reloc_frame_ = frame.index;
+      unverified_.clear();
+      verify_left_ = config_.relocalization_verify_frames;
+      if (verify_left_ == 0) accept_relocalization();
+    } else if (verifying) {
+      if (ok && (by_motion || !motion_expected) && consistent_after_relocalization(frame, expected)) {
+        if (--verify_left_ == 0) accept_relocalization();
+      } else {
+        ++reloc_stats_.rejected_by_consistency;
+        spdlog::info("relocalisation at frame {} rejected: frame {} did not track consistently from it",
+                     reloc_frame_, frame.index);
+        verify_left_ = 0;
+        unverified_.clear();  // already counted as lost
+        ok = false;
+      }
+    }
     const bool jumped = ok && predicted && guard_pose(view, frame, *predicted);
     if (ok) {
       if (last_frame_.has_pose) velocity_ = frame.T_cw * last_frame_.T_cw.inverse();
       state_ = TrackingState::Ok;
-      if (need_keyframe(view, frame, mapping)) {
+      // No keyframe from a pose that is not verified yet.
+      if (verify_left_ == 0 && need_keyframe(view, frame, mapping)) {
         if (jumped) {
           ++guard_stats_.keyframes_vetoed;
         } else {
@@ -108,9 +138,16 @@ TrackOutcome Tracker::track(Frame& frame, const MappingStatus& mapping) {
   if (state_ == TrackingState::Ok && frame.has_pose) {
     frame.reference = reference_;
     const map::Keyframe* ref = view.keyframe(reference_);
-    trajectory_.record({frame.index, frame.stamp, reference_, frame.T_cw * ref->T_cw.inverse()});
+    const TrajectoryEntry entry{frame.index, frame.stamp, reference_, frame.T_cw * ref->T_cw.inverse()};
+    if (verify_left_ > 0) {
+      unverified_.push_back(entry);
+      ++lost_frames_;  // until the verification passes
+      out.verifying = true;
+    } else {
+      trajectory_.record(entry);
+    }
   }
-  out.state = state_;
+  out.state = out.verifying ? TrackingState::Lost : state_;
   out.inliers = frame.matched();
   // Outliers are forgotten so the next frame does not project them.
   for (std::size_t i = 0; i < frame.points.size(); ++i) {
@@ -119,6 +156,24 @@ TrackOutcome Tracker::track(Frame& frame, const MappingStatus& mapping) {
   last_frame_ = frame;
   if (state_ != TrackingState::Ok) last_frame_.has_pose = false;
   return out;
+}
+
+bool Tracker::consistent_after_relocalization(const Frame& frame, const geo::SE3& expected_T_cw) const {
+  if (frame.matched() < config_.min_inliers_after_reloc) return false;
+  const PoseDeviation d = pose_deviation(frame.T_cw, expected_T_cw);
+  return d.translation_m <= config_.relocalization_max_step_m &&
+         d.rotation_deg <= config_.relocalization_max_step_deg;
+}
+
+void Tracker::accept_relocalization() {
+  ++relocalizations_;
+  ++reloc_stats_.accepted;
+  if (!first_reloc_frame_) first_reloc_frame_ = reloc_frame_;
+  for (const TrajectoryEntry& e : unverified_) trajectory_.record(e);
+  lost_frames_ -= std::min(lost_frames_, unverified_.size());
+  if (!unverified_.empty())
+    spdlog::info("relocalisation at frame {} verified over {} frames", reloc_frame_, unverified_.size());
+  unverified_.clear();
 }
 
 bool Tracker::initialize(map::MapView& view, Frame& frame) {
@@ -283,7 +338,7 @@ bool Tracker::track_local_map(map::MapView& view, Frame& frame) {
     if (map::MapPoint* p = view.live_point(frame.points[i])) ++p->found;
   }
   const int needed =
-      recently_relocalized && relocalizations_ > 0 ? config_.min_inliers_after_reloc : config_.min_inliers;
+      recently_relocalized && relocalized_once_ ? config_.min_inliers_after_reloc : config_.min_inliers;
   return inliers >= needed;
 }
 
@@ -324,8 +379,8 @@ bool Tracker::guard_pose(map::MapView& view, Frame& frame, const geo::SE3& predi
 }
 
 bool Tracker::relocalize(map::MapView& view, Frame& frame) {
-  // Candidates: the most recent keyframes and the covisibles of the last reference (a BoW keyframe
-  // database replaces this when the loop module provides one).
+  // Candidates: those of the provider (a BoW query over every keyframe of the map) first, then the
+  // most recent keyframes and the covisibles of the last reference.
   std::vector<map::KeyframeId> ids = view.keyframe_ids_sorted();
   std::vector<map::KeyframeId> candidates;
   for (auto it = ids.rbegin(); it != ids.rend() && candidates.size() < config_.relocalization_candidates;
@@ -345,6 +400,7 @@ bool Tracker::relocalize(map::MapView& view, Frame& frame) {
   for (map::KeyframeId kid : candidates) {
     const map::Keyframe* kf = view.keyframe(kid);
     if (kf == nullptr || kf->bad) continue;
+    ++reloc_stats_.candidates_tried;
     frame.reset_matches();
     if (match_keyframe(view, frame, *kf, 0.75f) < 15) continue;
     std::vector<cv::Point3f> object;
@@ -384,8 +440,7 @@ bool Tracker::relocalize(map::MapView& view, Frame& frame) {
     if (optimize_pose(view, frame) >= config_.min_inliers_after_reloc) {
       reference_ = kid;
       last_reloc_frame_ = frame.index;
-      ++relocalizations_;
-      if (!first_reloc_frame_) first_reloc_frame_ = frame.index;
+      relocalized_once_ = true;
       spdlog::info("relocalised frame {} against keyframe {}", frame.index, kid);
       return true;
     }

@@ -17,17 +17,23 @@
 namespace sp::track {
 
 struct TrackerConfig {
-  int init_min_features = 300;        // features with valid depth needed to start the map
+  int init_min_features = 300;  // features with valid depth needed to start the map
   // px at level 0, constant-velocity projection search. ORB-SLAM uses 15 for RGB-D (7 is its stereo
   // value); 15 lowered ATE on a rotating-camera room (0.53 -> 0.47 cm) and is neutral elsewhere.
   double motion_search_radius = 15.0;
-  int min_motion_matches = 20;        // below: fall back to the reference keyframe
-  double local_search_factor = 3.0;   // ORB-SLAM's RGB-D window factor for local-map search
-  int min_inliers = 30;               // local-map inliers for a frame to count as tracked
-  int min_inliers_after_reloc = 50;   // ... for one second after relocalisation
+  int min_motion_matches = 20;       // below: fall back to the reference keyframe
+  double local_search_factor = 3.0;  // ORB-SLAM's RGB-D window factor for local-map search
+  int min_inliers = 30;              // local-map inliers for a frame to count as tracked
+  int min_inliers_after_reloc = 50;  // ... for one second after relocalisation
   std::size_t max_local_keyframes = 80;
   int new_points_min = 100;  // close-depth points created per keyframe at least
   std::size_t relocalization_candidates = 20;
+  // A relocalised pose is trusted (written, allowed to make keyframes) only once this many following
+  // frames tracked from it: each with min_inliers_after_reloc local-map inliers and a pose within the
+  // step limits of the constant-velocity prediction (zero motion for the first). 0: trusted at once.
+  int relocalization_verify_frames = 3;
+  double relocalization_max_step_m = 0.05;   // m, camera-centre deviation allowed while verifying
+  double relocalization_max_step_deg = 5.0;  // deg, rotation deviation allowed while verifying
   opt::PoseOptimizerConfig pose;
   KeyframePolicyConfig keyframes;
   PoseGuardConfig guard;
@@ -46,7 +52,19 @@ struct TrackOutcome {
   TrackingState state = TrackingState::NotInitialized;
   map::KeyframeId new_keyframe = map::kNoKeyframe;
   int inliers = 0;
-  bool relocalized = false;
+  bool relocalized = false;  // this frame relocalised (its pose is still being verified when verifying)
+  // The frame tracked from a relocalised pose that is not yet verified: reported Lost, and written to
+  // the trajectory only when the verification passes.
+  bool verifying = false;
+};
+
+// Global relocalisation, counted per frame.
+struct RelocalizationStats {
+  std::size_t attempts = 0;                 // lost frames on which relocalisation was tried
+  std::size_t candidates_tried = 0;         // keyframes matched against over all attempts
+  std::size_t poses_found = 0;              // poses with enough inliers after projection refinement
+  std::size_t accepted = 0;                 // ... that passed the consistency check over the next frames
+  std::size_t rejected_by_consistency = 0;  // ... that did not (back to lost)
 };
 
 // Relocalisation candidates from anywhere in the map (a BoW keyframe database, a whole-image score),
@@ -71,7 +89,9 @@ class Tracker {
 
   [[nodiscard]] TrackingState state() const { return state_; }
   [[nodiscard]] std::size_t lost_frames() const { return lost_frames_; }
+  // Relocalisations accepted (verified).
   [[nodiscard]] std::size_t relocalizations() const { return relocalizations_; }
+  [[nodiscard]] const RelocalizationStats& relocalization_stats() const { return reloc_stats_; }
   [[nodiscard]] const PoseGuardStats& guard_stats() const { return guard_stats_; }
   [[nodiscard]] const TrajectoryRecorder& trajectory() const { return trajectory_; }
   [[nodiscard]] const KeyframePolicy& policy() const { return *policy_; }
@@ -83,6 +103,11 @@ class Tracker {
   bool track_motion_model(map::MapView& view, Frame& frame);
   bool track_reference_keyframe(map::MapView& view, Frame& frame);
   bool relocalize(map::MapView& view, Frame& frame);
+  // One frame of the check after a relocalisation: true while the frame agrees with the relocalised
+  // pose's motion (see TrackerConfig::relocalization_verify_frames).
+  [[nodiscard]] bool consistent_after_relocalization(const Frame& frame, const geo::SE3& expected_T_cw) const;
+  // The relocalised pose passed its check: counted, and the frames tracked from it are written.
+  void accept_relocalization();
   bool track_local_map(map::MapView& view, Frame& frame);
   // The pose guard (PoseGuardConfig). True when the frame jumped: it must not become a keyframe.
   bool guard_pose(map::MapView& view, Frame& frame, const geo::SE3& predicted_T_cw);
@@ -113,6 +138,11 @@ class Tracker {
   std::vector<map::PointId> local_points_;
   std::size_t lost_frames_ = 0;
   std::size_t relocalizations_ = 0;
+  bool relocalized_once_ = false;            // a relocalised pose was found (last_reloc_frame_ is meaningful)
+  std::size_t reloc_frame_ = 0;              // frame of the relocalised pose being verified (or the last one)
+  int verify_left_ = 0;                      // frames still to check after a relocalisation (0: trusted)
+  std::vector<TrajectoryEntry> unverified_;  // frames tracked since then, written once verified
+  RelocalizationStats reloc_stats_;
   RelocalizationCandidates reloc_candidates_;
   std::optional<std::size_t> first_reloc_frame_;
   TrajectoryRecorder trajectory_;
