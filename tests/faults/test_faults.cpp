@@ -383,8 +383,11 @@ TEST_F(Faults, PersonFillingTheViewForOneSecondIsSurvived) {
 
 // The camera carried away: after frame 99 the frames jump to the start of the path, as frames 200
 // later in a sequence that comes back would (the shared cut has 150 frames, so the jump target is its
-// frames 0-59 replayed, stamps going on at 30 Hz; the pose jumps ~32 cm).
-TEST_F(Faults, KidnappedCameraRelocalises) {
+// frames 0-59 replayed, stamps going on at 30 Hz; the pose jumps ~32 cm). Found again either by the
+// reference-keyframe fallback (what happens on this cut: the view direction is the same, so the
+// keyframe's points still match and the pose optimisation converges from 32 cm away) or by
+// relocalisation; either way the poses after the jump must be right (ATE) and none may be missing.
+TEST_F(Faults, KidnappedCameraIsFoundAgain) {
   std::vector<std::size_t> order;
   for (std::size_t i = 0; i < 100; ++i) order.push_back(i);
   for (std::size_t i = 0; i < 60; ++i) order.push_back(i);
