@@ -325,9 +325,19 @@ TEST_F(Faults, TwoSecondGapIsBridged) {
 // and each relocalised pose is checked over the next frames before it is written. ATE bound: the
 // clean runs above (2 cm, the same bound as every fault test here); a relocalisation to a wrong place
 // would put decimetres of error on the 40+ frames after it.
+// Every keyframe made was filed in the relocalisation database and every culled one erased again, so
+// at the end it holds exactly the live keyframes (deterministic: all stages have run).
+void expect_database_matches_map(const nlohmann::json& stats) {
+  const auto& r = stats["relocalization"];
+  EXPECT_EQ(r["database"].get<std::string>(), "bow");
+  EXPECT_EQ(r["database_filed"].get<int>(), stats["keyframes_created"].get<int>());
+  EXPECT_EQ(r["database_keyframes"].get<int>(), stats["keyframes"].get<int>());
+  EXPECT_EQ(r["database_filed"].get<int>() - r["database_erased"].get<int>(), stats["keyframes"].get<int>());
+}
+
 void expect_relocalised(const Outcome& o) {
   const auto& r = o.result.stats["relocalization"];
-  EXPECT_EQ(r["database"].get<std::string>(), "bow");
+  expect_database_matches_map(o.result.stats);
   EXPECT_GE(r["accepted"].get<int>(), 1);
   EXPECT_GE(r["attempts"].get<int>(), r["poses_found"].get<int>());
   EXPECT_EQ(r["poses_found"].get<int>(), r["accepted"].get<int>() + r["rejected_by_consistency"].get<int>());
@@ -400,6 +410,7 @@ TEST_F(Faults, KidnappedCameraIsFoundAgain) {
   EXPECT_TRUE(o.tracked(seq.frames().back().rgb_stamp));
   ASSERT_TRUE(o.result.ate_rmse.has_value());
   EXPECT_LT(*o.result.ate_rmse, 0.02);
+  expect_database_matches_map(o.result.stats);
   std::printf("[ reloc    ] kidnapped: %s\n", o.result.stats["relocalization"].dump().c_str());
 }
 
