@@ -477,7 +477,9 @@ bool Tracker::need_keyframe(map::MapView& view, const Frame& frame, const Mappin
       if (frame.points[i] == map::kNoPoint || frame.outlier[i]) continue;
       const map::MapPoint* p = view.live_point(frame.points[i]);
       if (p == nullptr) continue;
-      const double angle = viewing_angle_change_deg(p->position, c_ref, c_now);
+      const double angle = config_.keyframes.effective_reference == "point"
+                               ? angle_from_normal_deg(p->position, p->normal, c_now)
+                               : viewing_angle_change_deg(p->position, c_ref, c_now);
       c.view_changes.push_back(
           {frame.features.keypoints[i].pt.x, frame.features.keypoints[i].pt.y, static_cast<float>(angle)});
     }
