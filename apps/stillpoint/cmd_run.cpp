@@ -88,6 +88,20 @@ std::string floats_base64(const std::vector<float>& v) {
       std::string_view(reinterpret_cast<const char*>(v.data()), v.size() * sizeof(float)));
 }
 
+// The map (up to 30000 points) and the keyframe positions, as one "map" event.
+void publish_map(report::LiveViewServer& server, pipeline::SlamSystem& system) {
+  std::vector<float> points, keyframes;
+  for (const auto& p : system.map_point_positions(30000)) points.insert(points.end(), {p.x(), p.y(), p.z()});
+  for (const auto& k : system.keyframe_trajectory())
+    keyframes.insert(keyframes.end(),
+                     {static_cast<float>(k.t.x()), static_cast<float>(k.t.y()), static_cast<float>(k.t.z())});
+  server.publish("map", nlohmann::json{{"points", floats_base64(points)},
+                                       {"count", points.size() / 3},
+                                       {"keyframes", floats_base64(keyframes)},
+                                       {"keyframe_count", keyframes.size() / 3}}
+                            .dump());
+}
+
 // Streams the run to a LiveViewServer (report/live_view.hpp): every pose, the map and keyframes after
 // each keyframe (and every 30 frames), the frame with its culled features every 3rd frame.
 void attach_live_view(report::LiveViewServer& server, pipeline::RunOptions& options) {
@@ -105,19 +119,7 @@ void attach_live_view(report::LiveViewServer& server, pipeline::RunOptions& opti
     }
     server.publish("pose", pose.dump());
     if (server.clients() == 0) return;  // the rest is only worth its cost when someone watches
-    if (r.keyframe || frames % 30 == 0) {
-      std::vector<float> points, keyframes;
-      for (const auto& p : system.map_point_positions(30000))
-        points.insert(points.end(), {p.x(), p.y(), p.z()});
-      for (const auto& k : system.keyframe_trajectory())
-        keyframes.insert(keyframes.end(), {static_cast<float>(k.t.x()), static_cast<float>(k.t.y()),
-                                           static_cast<float>(k.t.z())});
-      server.publish("map", nlohmann::json{{"points", floats_base64(points)},
-                                           {"count", points.size() / 3},
-                                           {"keyframes", floats_base64(keyframes)},
-                                           {"keyframe_count", keyframes.size() / 3}}
-                                .dump());
-    }
+    if (r.keyframe || frames % 30 == 0) publish_map(server, system);
     if (frames % 3 == 1 && !f.bgr.empty()) {
       cv::Mat small;
       const double scale = 320.0 / f.bgr.cols;
@@ -134,17 +136,7 @@ void attach_live_view(report::LiveViewServer& server, pipeline::RunOptions& opti
     }
   };
   options.on_finish = [&server](pipeline::SlamSystem& system) {
-    std::vector<float> points, keyframes;
-    for (const auto& p : system.map_point_positions(30000))
-      points.insert(points.end(), {p.x(), p.y(), p.z()});
-    for (const auto& k : system.keyframe_trajectory())
-      keyframes.insert(keyframes.end(), {static_cast<float>(k.t.x()), static_cast<float>(k.t.y()),
-                                         static_cast<float>(k.t.z())});
-    server.publish("map", nlohmann::json{{"points", floats_base64(points)},
-                                         {"count", points.size() / 3},
-                                         {"keyframes", floats_base64(keyframes)},
-                                         {"keyframe_count", keyframes.size() / 3}}
-                              .dump());
+    publish_map(server, system);
     const auto stats = system.statistics();
     server.publish("end", nlohmann::json{{"frames", stats.value("frames", 0)},
                                          {"tracked", stats.value("tracked_frames", 0)}}

@@ -135,9 +135,12 @@ int LocalMapper::create_new_points(map::KeyframeId kid) {
   TriangulationView& first = snaps.front().view;
   for (std::size_t k = 1; k < snaps.size(); ++k) {
     const std::vector<TriangulatedPoint> pair_points = triangulator_.triangulate(first, snaps[k].view);
-    spdlog::debug("triangulation: keyframe {} with {}: {} free / {} free features, {} new points", kid,
-                  snaps[k].id, std::count(first.free.begin(), first.free.end(), true),
-                  std::count(snaps[k].view.free.begin(), snaps[k].view.free.end(), true), pair_points.size());
+    if (spdlog::should_log(spdlog::level::debug)) {
+      spdlog::debug("triangulation: keyframe {} with {}: {} free / {} free features, {} new points", kid,
+                    snaps[k].id, std::count(first.free.begin(), first.free.end(), true),
+                    std::count(snaps[k].view.free.begin(), snaps[k].view.free.end(), true),
+                    pair_points.size());
+    }
     for (const TriangulatedPoint& p : pair_points) {
       first.free[static_cast<std::size_t>(p.feature1)] = false;  // best covisibles claim features first
       found.push_back({snaps[k].id, p});
