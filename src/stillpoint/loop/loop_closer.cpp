@@ -3,6 +3,7 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <cmath>
 #include <map>
 #include <unordered_map>
 #include <unordered_set>
@@ -34,6 +35,12 @@ LoopClosingConfig LoopClosingConfig::from_yaml(const ConfigReader& r) {
   r.read("ransac_threshold_m", c.ransac_threshold_m, 0.001, 1.0);
   r.read("min_ransac_inliers", c.min_ransac_inliers, 3, 10000);
   r.read("min_projection_inliers", c.min_projection_inliers, 3, 10000);
+  r.read("verify_neighbours", c.verify_neighbours, 0, 50);
+  r.read("neighbour_min_inliers", c.neighbour_min_inliers, 3, 10000);
+  r.read("drift_check", c.drift.enabled);
+  r.read("max_correction_m", c.drift.base_m, 0.0, 1000.0);
+  r.read("max_correction_deg", c.drift.base_deg, 0.0, 180.0);
+  r.read("max_correction_ratio", c.drift.ratio, 0.0, 10.0);
   r.read("global_ba", c.global_ba);
   r.read("global_ba_iterations", c.global_ba_iterations, 1, 1000);
   return c;
@@ -244,12 +251,6 @@ std::optional<LoopCloser::Verified> LoopCloser::verify(map::KeyframeId query, ma
   }
 
   // 3. Refine: project the loop side's local map into the query with the RANSAC pose, then optimise.
-  track::Frame frame;
-  frame.features = q->features;
-  frame.grid = map::make_feature_grid(frame.features.keypoints, camera_.width, camera_.height);
-  frame.reset_matches();
-  frame.T_cw = ransac->T_dst_src;
-  frame.has_pose = true;
   std::vector<map::PointId> local;
   std::unordered_set<map::PointId> seen;
   std::vector<map::KeyframeId> loop_side = view.best_covisibles(match, 10);
@@ -261,6 +262,73 @@ std::optional<LoopCloser::Verified> LoopCloser::verify(map::KeyframeId query, ma
       if (pid != map::kNoPoint && seen.insert(pid).second) local.push_back(pid);
     }
   }
+  geo::SE3 T = ransac->T_dst_src;
+  const int inliers = project_and_refine(view, *q, local, T);
+  if (inliers < config_.min_projection_inliers) {
+    spdlog::debug("loop candidate {}->{}: {} inliers after refinement, rejected", query, match, inliers);
+    return std::nullopt;
+  }
+
+  // 4. A correction larger than the odometry can have drifted since the match is a look-alike place.
+  if (config_.drift.enabled) {
+    std::vector<geo::SE3> path_poses;
+    for (map::KeyframeId k : view.keyframe_ids_sorted()) {
+      if (k < match || k > query) continue;
+      const map::Keyframe* kf = view.keyframe(k);
+      if (kf != nullptr && !kf->bad) path_poses.push_back(kf->T_cw);
+    }
+    const Motion path = travelled(path_poses);
+    const Motion moved = correction(q->T_cw, T);
+    if (!plausible(moved, path, config_.drift)) {
+      const Motion allowed = allowance(path, config_.drift);
+      spdlog::info(
+          "loop candidate {}->{} rejected: it would move the keyframe {:.2f} m / {:.1f} deg, more than drift "
+          "allows after {:.1f} m / {:.0f} deg travelled ({:.2f} m / {:.1f} deg)",
+          query, match, moved.metres, moved.degrees, path.metres, path.degrees, allowed.metres,
+          allowed.degrees);
+      {
+        std::lock_guard lock(stats_mutex_);
+        ++stats_.rejected_by_drift;
+      }
+      return std::nullopt;
+    }
+  }
+
+  // 5. The same correction must hold for the query's neighbours: each keeps its pose relative to the
+  // query and must see the loop side's points where the corrected pose puts them.
+  if (config_.verify_neighbours > 0) {
+    const std::vector<map::KeyframeId> neighbours =
+        view.best_covisibles(query, static_cast<std::size_t>(config_.verify_neighbours));
+    int tried = 0, confirmed = 0;
+    for (map::KeyframeId n : neighbours) {
+      const map::Keyframe* nkf = view.keyframe(n);
+      if (nkf == nullptr || nkf->bad || std::find(loop_side.begin(), loop_side.end(), n) != loop_side.end())
+        continue;
+      ++tried;
+      geo::SE3 T_n = nkf->T_cw * q->T_cw.inverse() * T;
+      if (project_and_refine(view, *nkf, local, T_n) >= config_.neighbour_min_inliers) ++confirmed;
+    }
+    if (tried > 0 && 2 * confirmed < tried) {
+      {
+        std::lock_guard lock(stats_mutex_);
+        ++stats_.rejected_by_neighbours;
+      }
+      spdlog::debug("loop candidate {}->{}: confirmed by {} of {} neighbours, rejected", query, match,
+                    confirmed, tried);
+      return std::nullopt;
+    }
+  }
+  return Verified{T, inliers, LoopClosure{q->stamp, m->stamp, T * m->T_cw.inverse(), inliers}};
+}
+
+int LoopCloser::project_and_refine(map::MapView& view, const map::Keyframe& kf,
+                                   const std::vector<map::PointId>& local, geo::SE3& T_cw) const {
+  track::Frame frame;
+  frame.features = kf.features;
+  frame.grid = map::make_feature_grid(frame.features.keypoints, camera_.width, camera_.height);
+  frame.reset_matches();
+  frame.T_cw = T_cw;
+  frame.has_pose = true;
   track::match_local_points(view, frame, local, 3.0, track::MatchContext{camera_, pyramid_, depth_.bf});
   std::vector<opt::PoseObservation> obs;
   for (std::size_t i = 0; i < frame.points.size(); ++i) {
@@ -271,17 +339,11 @@ std::optional<LoopCloser::Verified> LoopCloser::verify(map::KeyframeId query, ma
                    frame.features.u_right[i],
                    pyramid_.inv_level_sigma2[static_cast<std::size_t>(kp.octave)]});
   }
-  if (static_cast<int>(obs.size()) < config_.min_projection_inliers) return std::nullopt;
-  geo::SE3 T = ransac->T_dst_src;
-  const auto result =
-      opt::optimize_pose(T, obs, opt::CameraModel{camera_.fx, camera_.fy, camera_.cx, camera_.cy, depth_.bf},
-                         opt::PoseOptimizerConfig{});
-  if (result.inliers < config_.min_projection_inliers) {
-    spdlog::debug("loop candidate {}->{}: {} inliers after refinement, rejected", query, match,
-                  result.inliers);
-    return std::nullopt;
-  }
-  return Verified{T, result.inliers, LoopClosure{q->stamp, m->stamp, T * m->T_cw.inverse(), result.inliers}};
+  if (obs.size() < 3) return 0;
+  const auto result = opt::optimize_pose(
+      T_cw, obs, opt::CameraModel{camera_.fx, camera_.fy, camera_.cx, camera_.cy, depth_.bf},
+      opt::PoseOptimizerConfig{});
+  return result.inliers;
 }
 
 void LoopCloser::correct(map::KeyframeId query, map::KeyframeId match, const geo::SE3& T_query_w) {

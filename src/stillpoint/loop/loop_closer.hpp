@@ -10,6 +10,7 @@
 #include <thread>
 
 #include "stillpoint/common/config_reader.hpp"
+#include "stillpoint/loop/drift_limit.hpp"
 #include "stillpoint/loop/loop_detector.hpp"
 #include "stillpoint/loop/vocabulary.hpp"
 #include "stillpoint/map/map.hpp"
@@ -29,7 +30,15 @@ struct LoopClosingConfig {
   double ransac_threshold_m = 0.05;  // 3-D/3-D RANSAC inlier distance
   int min_ransac_inliers = 20;
   int min_projection_inliers = 40;  // inliers after refinement with projection matches
-  bool global_ba = true;            // run a global BA after each closed loop (background thread)
+  // The loop pose must also hold for the query's best covisible keyframes (moved with it): of the first
+  // verify_neighbours (0: no check), at least half must reach neighbour_min_inliers. A place that only
+  // looks alike from one view (a symmetric room, a repeated poster) fails from the next ones.
+  int verify_neighbours = 4;
+  int neighbour_min_inliers = 30;
+  // A loop whose correction is larger than odometry can have drifted since the matched keyframe is a
+  // look-alike place (drift_limit.hpp).
+  DriftLimitConfig drift;
+  bool global_ba = true;  // run a global BA after each closed loop (background thread)
   int global_ba_iterations = 10;
   static LoopClosingConfig from_yaml(const ConfigReader& r);
 };
@@ -43,13 +52,15 @@ struct LoopClosure {
 
 struct LoopClosingStats {
   std::size_t keyframes = 0;
-  std::size_t candidates = 0;      // candidates from the detector (before verification)
-  std::size_t loops_detected = 0;  // candidates that passed geometric verification
-  std::size_t loops_closed = 0;    // corrections applied
-  std::size_t queries = 0;         // database queries made by the detector
-  double detection_ms_total = 0;   // candidate search in the database (not BoW, not verification)
-  double bow_ms_total = 0;         // BoW conversion of the keyframes
-  double global_ms_total = 0;      // global (ParC_NetVLAD) descriptors of the keyframes
+  std::size_t candidates = 0;              // candidates from the detector (before verification)
+  std::size_t loops_detected = 0;          // candidates that passed geometric verification
+  std::size_t loops_closed = 0;            // corrections applied
+  std::size_t rejected_by_drift = 0;       // verified geometrically, but moved further than drift allows
+  std::size_t rejected_by_neighbours = 0;  // the query's neighbours did not confirm the loop pose
+  std::size_t queries = 0;                 // database queries made by the detector
+  double detection_ms_total = 0;           // candidate search in the database (not BoW, not verification)
+  double bow_ms_total = 0;                 // BoW conversion of the keyframes
+  double global_ms_total = 0;              // global (ParC_NetVLAD) descriptors of the keyframes
   double correction_ms_total = 0;
   std::size_t global_ba_runs = 0;
   std::size_t global_ba_aborted = 0;
@@ -100,6 +111,9 @@ class LoopCloser {
   };
   void handle_candidates(const std::vector<LoopCandidate>& candidates, map::KeyframeId kid);
   std::optional<Verified> verify(map::KeyframeId query, map::KeyframeId match);
+  // Projects the loop side's points into a keyframe at T_cw, refines T_cw on the matches; the inliers.
+  int project_and_refine(map::MapView& view, const map::Keyframe& kf, const std::vector<map::PointId>& local,
+                         geo::SE3& T_cw) const;
   void correct(map::KeyframeId query, map::KeyframeId match, const geo::SE3& T_query_w);
   void start_global_ba(std::uint64_t changes_at_start);
   void run_global_ba(std::uint64_t changes_at_start);

@@ -409,6 +409,10 @@ nlohmann::json SlamSystem::statistics() {
   j["pose_guard"] = {{"jumps", tracker_.guard_stats().jumps},
                      {"resolved", tracker_.guard_stats().resolved},
                      {"keyframes_vetoed", tracker_.guard_stats().keyframes_vetoed}};
+  j["subpixel"] = {{"enabled", config_.tracker.subpixel.enabled},
+                   {"frames", tracker_.subpixel_stats().frames},
+                   {"candidates", tracker_.subpixel_stats().candidates},
+                   {"refined", tracker_.subpixel_stats().refined}};
   j["keyframes_created"] = keyframes_created_;
   j["keyframe_policy"] = tracker_.policy().name();
   j["keyframe_rules"] = nlohmann::json::object();  // how often each rule of the policy fired
@@ -434,6 +438,8 @@ nlohmann::json SlamSystem::statistics() {
   if (closer_) {
     const auto ls = closer_->stats();
     j["loops_detected"] = ls.loops_detected;
+    j["loops_rejected_by_drift"] = ls.rejected_by_drift;
+    j["loops_rejected_by_neighbours"] = ls.rejected_by_neighbours;
     j["loops_closed"] = ls.loops_closed;
     j["loop_candidates"] = ls.candidates;
     j["loop_queries"] = ls.queries;

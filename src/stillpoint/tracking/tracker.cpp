@@ -30,6 +30,7 @@ TrackerConfig TrackerConfig::from_yaml(const ConfigReader& r) {
   c.pose = opt::PoseOptimizerConfig::from_yaml(r.section("pose_optimizer"));
   c.keyframes = KeyframePolicyConfig::from_yaml(r.section("keyframes"));
   c.guard = PoseGuardConfig::from_yaml(r.section("pose_guard"));
+  c.subpixel = AnchorRefinerConfig::from_yaml(r.section("subpixel"));
   return c;
 }
 
@@ -55,7 +56,8 @@ Tracker::Tracker(map::Map& map, TrackerConfig config, geo::CameraIntrinsics came
       fps_(fps),
       policy_(make_keyframe_policy(config_.keyframes)),
       camera_model_{camera.fx, camera.fy, camera.cx, camera.cy, depth.bf},
-      guard_(config_.guard) {}
+      guard_(config_.guard),
+      refiner_(config_.subpixel, camera, pyramid_) {}
 
 void Tracker::start_in_existing_map() {
   // Lost, not NotInitialized: the next frames go through relocalize() and never create a map at
@@ -63,11 +65,13 @@ void Tracker::start_in_existing_map() {
   state_ = TrackingState::Lost;
   reference_ = map::kNoKeyframe;
   velocity_.reset();
+  refiner_.reset();
 }
 
 TrackOutcome Tracker::track(Frame& frame, const MappingStatus& mapping) {
   TrackOutcome out;
   frame.reset_matches();
+  refined_.assign(frame.features.size(), false);
   frame.grid = map::make_feature_grid(frame.features.keypoints, camera_.width, camera_.height);
   map::MapView view = map_.view();
 
@@ -246,7 +250,9 @@ int Tracker::optimize_pose(map::MapView& view, Frame& frame) {
     o.point_w = p->position;
     o.uv = {kp.pt.x, kp.pt.y};
     o.u_right = frame.features.u_right[i];
-    o.inv_sigma2 = pyramid_.inv_level_sigma2[static_cast<std::size_t>(kp.octave)];
+    o.inv_sigma2 = refined_.size() == frame.points.size() && refined_[i] && config_.subpixel.level0_weight
+                       ? 1.0
+                       : pyramid_.inv_level_sigma2[static_cast<std::size_t>(kp.octave)];
     obs.push_back(o);
     feature_of.push_back(i);
   }
@@ -332,7 +338,9 @@ bool Tracker::track_local_map(map::MapView& view, Frame& frame) {
   const double factor =
       recently_relocalized ? 2.0 * config_.local_search_factor : config_.local_search_factor;
   match_local_points(view, frame, local_points_, factor, MatchContext{camera_, pyramid_, depth_.bf});
-  const int inliers = optimize_pose(view, frame);
+  int inliers = optimize_pose(view, frame);
+  if (inliers >= config_.min_inliers && refiner_.refine(view, frame, refined_) > 0)
+    inliers = optimize_pose(view, frame);
   for (std::size_t i = 0; i < frame.points.size(); ++i) {
     if (frame.points[i] == map::kNoPoint || frame.outlier[i]) continue;
     if (map::MapPoint* p = view.live_point(frame.points[i])) ++p->found;
@@ -530,6 +538,7 @@ map::KeyframeId Tracker::create_keyframe(map::MapView& view, Frame& frame) {
   view.update_connections(kid);
   reference_ = kid;
   last_keyframe_frame_ = frame.index;
+  refiner_.set_anchor(kid, frame);
   return kid;
 }
 

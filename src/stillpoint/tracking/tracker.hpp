@@ -9,6 +9,7 @@
 
 #include "stillpoint/map/map.hpp"
 #include "stillpoint/optimize/pose_optimizer.hpp"
+#include "stillpoint/tracking/anchor_refiner.hpp"
 #include "stillpoint/tracking/frame.hpp"
 #include "stillpoint/tracking/keyframe_policy.hpp"
 #include "stillpoint/tracking/pose_guard.hpp"
@@ -37,6 +38,7 @@ struct TrackerConfig {
   opt::PoseOptimizerConfig pose;
   KeyframePolicyConfig keyframes;
   PoseGuardConfig guard;
+  AnchorRefinerConfig subpixel;
   static TrackerConfig from_yaml(const ConfigReader& r);
 };
 
@@ -93,6 +95,7 @@ class Tracker {
   [[nodiscard]] std::size_t relocalizations() const { return relocalizations_; }
   [[nodiscard]] const RelocalizationStats& relocalization_stats() const { return reloc_stats_; }
   [[nodiscard]] const PoseGuardStats& guard_stats() const { return guard_stats_; }
+  [[nodiscard]] const AnchorRefinerStats& subpixel_stats() const { return refiner_.stats(); }
   [[nodiscard]] const TrajectoryRecorder& trajectory() const { return trajectory_; }
   [[nodiscard]] const KeyframePolicy& policy() const { return *policy_; }
   // Camera motion from the previous frame to the next one by the constant-velocity model (T_cur_prev).
@@ -148,6 +151,8 @@ class Tracker {
   TrajectoryRecorder trajectory_;
   PoseGuardRules guard_;
   PoseGuardStats guard_stats_;
+  AnchorRefiner refiner_;
+  std::vector<bool> refined_;  // per feature of the frame being tracked: position aligned with the anchor
 };
 
 }  // namespace sp::track
