@@ -291,6 +291,20 @@ void OrbExtractor::extract(const cv::Mat& gray, std::vector<cv::KeyPoint>& keypo
     throw sp::Error("OrbExtractor::extract: mask must be CV_8UC1 of the image size");
   }
   build_pyramid(gray);
+  detect_and_describe(mask, keypoints, descriptors);
+}
+
+void OrbExtractor::extract_again(const cv::Mat& mask, std::vector<cv::KeyPoint>& keypoints,
+                                 cv::Mat& descriptors) {
+  if (level_size_.empty()) throw sp::Error("OrbExtractor::extract_again: no extract() call before");
+  if (mask.empty() || mask.type() != CV_8UC1 || mask.size() != level_size_[0]) {
+    throw sp::Error("OrbExtractor::extract_again: mask must be CV_8UC1 of the image size");
+  }
+  detect_and_describe(mask, keypoints, descriptors);
+}
+
+void OrbExtractor::detect_and_describe(const cv::Mat& mask, std::vector<cv::KeyPoint>& keypoints,
+                                       cv::Mat& descriptors) {
   if (config_.parallel_levels) {
     // Each level writes only its own buffers, so the result does not depend on scheduling.
     cv::parallel_for_(cv::Range(0, config_.n_levels), [&](const cv::Range& r) {

@@ -47,6 +47,9 @@ class OrbExtractor {
   // descriptors: N x 32 CV_8U, row i belongs to keypoints[i]. Output is deterministic.
   void extract(const cv::Mat& gray, std::vector<cv::KeyPoint>& keypoints, cv::Mat& descriptors,
                const cv::Mat& mask = cv::Mat());
+  // Detection again on the pyramid of the last extract() call (not rebuilt), only where mask != 0:
+  // the whole keypoint budget goes to the unmasked area. Throws when extract() was not called.
+  void extract_again(const cv::Mat& mask, std::vector<cv::KeyPoint>& keypoints, cv::Mat& descriptors);
 
   [[nodiscard]] int levels() const noexcept { return config_.n_levels; }
   [[nodiscard]] double scale_factor() const noexcept { return config_.scale_factor; }
@@ -64,6 +67,7 @@ class OrbExtractor {
  private:
   void build_pyramid(const cv::Mat& gray);
   void process_level(int level, const cv::Mat& mask);
+  void detect_and_describe(const cv::Mat& mask, std::vector<cv::KeyPoint>& keypoints, cv::Mat& descriptors);
 
   OrbConfig config_;
   std::vector<double> scale_, inv_scale_, sigma2_, inv_sigma2_;

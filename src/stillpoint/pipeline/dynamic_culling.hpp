@@ -26,6 +26,10 @@ struct DynamicConfig {
   // Scheduling niceness of the detector thread (0 = as tracking). 2 keeps tracking within +5 ms of
   // culling-off on 2 cores; 5 and more starve the detector and stale boxes cost accuracy (docs/dynamic.md).
   int detector_nice = 2;
+  // Where culling removed more than this share of a frame's features, detection runs again away from
+  // the moving objects so the static part gets the keypoint budget (a person filling the view of a
+  // bare room left too few features to start the map). 0: never.
+  double refill_share = 0.3;
   dyn::DetectorConfig detector;  // used as given when the file sets `detector`, else from the model
   bool detector_configured = false;
   dyn::MotionCheckConfig motion;

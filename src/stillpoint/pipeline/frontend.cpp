@@ -1,5 +1,7 @@
 #include "stillpoint/pipeline/frontend.hpp"
 
+#include <algorithm>
+#include <cmath>
 #include <opencv2/imgproc.hpp>
 
 namespace sp::pipeline {
@@ -21,6 +23,38 @@ ExtractedFeatures FrontEnd::extract(const io::FrameData& data) {
   }
   extractor_.extract(out.gray, out.keypoints, out.descriptors);
   return out;
+}
+
+std::size_t FrontEnd::refill(ExtractedFeatures& features, std::vector<bool>& drop, std::vector<bool>& suspect,
+                             const std::vector<cv::Rect2f>& dynamic_boxes) {
+  cv::Mat mask(features.gray.size(), CV_8UC1, cv::Scalar(255));
+  for (const cv::Rect2f& b : dynamic_boxes) {
+    cv::rectangle(
+        mask,
+        cv::Rect(cv::Point(static_cast<int>(b.x) - 4, static_cast<int>(b.y) - 4),
+                 cv::Point(static_cast<int>(b.x + b.width) + 4, static_cast<int>(b.y + b.height) + 4)),
+        cv::Scalar(0), cv::FILLED);
+  }
+  // Removed features (a moving cluster outside any box) block a wider disc than kept ones, which
+  // only must not be detected twice.
+  for (std::size_t i = 0; i < features.keypoints.size(); ++i) {
+    const bool removed = i < drop.size() && drop[i];
+    const double scale = std::pow(extractor_.scale_factor(), std::max(features.keypoints[i].octave, 0));
+    cv::circle(mask, features.keypoints[i].pt, static_cast<int>(std::lround((removed ? 12.0 : 3.0) * scale)),
+               cv::Scalar(0), cv::FILLED);
+  }
+  std::vector<cv::KeyPoint> extra;
+  cv::Mat extra_desc;
+  extractor_.extract_again(mask, extra, extra_desc);
+  if (extra.empty()) return 0;
+  const std::size_t before = features.keypoints.size();
+  drop.resize(before, false);
+  if (!suspect.empty()) suspect.resize(before, false);
+  features.keypoints.insert(features.keypoints.end(), extra.begin(), extra.end());
+  cv::vconcat(features.descriptors, extra_desc, features.descriptors);
+  drop.resize(features.keypoints.size(), false);
+  if (!suspect.empty()) suspect.resize(features.keypoints.size(), false);
+  return extra.size();
 }
 
 track::Frame FrontEnd::assemble(const io::FrameData& data, ExtractedFeatures features,

@@ -306,6 +306,18 @@ FrameReport SlamSystem::process(const io::FrameData& data) {
     if (dynamic[i]) culled_points.push_back(features.keypoints[i].pt);
   artifacts_.on_frame(data, features.keypoints, dynamic, culled.result.boxes, culled.result.box_dynamic);
   if (culling_score_) culling_score_->add(data.rgb_path, features.keypoints, dynamic);
+  const double refill_share = config_.dynamic.refill_share;
+  if (refill_share > 0 && !features.keypoints.empty() &&
+      static_cast<double>(culled_points.size()) >
+          refill_share * static_cast<double>(features.keypoints.size())) {
+    watch.restart();
+    std::vector<cv::Rect2f> boxes;
+    for (std::size_t b = 0; b < culled.result.boxes.size(); ++b)
+      if (b < culled.result.box_dynamic.size() && culled.result.box_dynamic[b])
+        boxes.push_back(culled.result.boxes[b].box);
+    refilled_total_ += frontend_.refill(features, dynamic, suspect, boxes);
+    times_.add("refill", watch.elapsed_ms());
+  }
   track::Frame frame = frontend_.assemble(data, std::move(features), dynamic, suspect);
   culled_total_ += frame.culled;
 
@@ -420,6 +432,7 @@ nlohmann::json SlamSystem::statistics() {
   j["dynamic_mode"] = culling_.mode();
   j["detector_model"] = culling_.model_file().string();  // empty when no detector ran
   j["culled_features_total"] = culled_total_;
+  j["refilled_features_total"] = refilled_total_;
   if (culling_score_) j["culling_score"] = culling_score_->to_json();
   j["culled_features_per_frame"] =
       frames_ > 0 ? static_cast<double>(culled_total_) / static_cast<double>(frames_) : 0.0;

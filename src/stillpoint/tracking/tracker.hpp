@@ -18,7 +18,7 @@
 namespace sp::track {
 
 struct TrackerConfig {
-  int init_min_features = 300;  // features with valid depth needed to start the map
+  int init_min_features = 200;  // features with valid depth needed to start the map
   // px at level 0, constant-velocity projection search. ORB-SLAM uses 15 for RGB-D (7 is its stereo
   // value); 15 lowered ATE on a rotating-camera room (0.53 -> 0.47 cm) and is neutral elsewhere.
   double motion_search_radius = 15.0;
