@@ -1,7 +1,6 @@
 #include "stillpoint/pipeline/frontend.hpp"
 
 #include <algorithm>
-#include <cmath>
 #include <opencv2/imgproc.hpp>
 
 namespace sp::pipeline {
@@ -39,7 +38,8 @@ std::size_t FrontEnd::refill(ExtractedFeatures& features, std::vector<bool>& dro
   // only must not be detected twice.
   for (std::size_t i = 0; i < features.keypoints.size(); ++i) {
     const bool removed = i < drop.size() && drop[i];
-    const double scale = std::pow(extractor_.scale_factor(), std::max(features.keypoints[i].octave, 0));
+    const double scale = extractor_.scale_factors()[static_cast<std::size_t>(
+        std::clamp(features.keypoints[i].octave, 0, extractor_.levels() - 1))];
     cv::circle(mask, features.keypoints[i].pt, static_cast<int>(std::lround((removed ? 12.0 : 3.0) * scale)),
                cv::Scalar(0), cv::FILLED);
   }
@@ -47,9 +47,6 @@ std::size_t FrontEnd::refill(ExtractedFeatures& features, std::vector<bool>& dro
   cv::Mat extra_desc;
   extractor_.extract_again(mask, extra, extra_desc);
   if (extra.empty()) return 0;
-  const std::size_t before = features.keypoints.size();
-  drop.resize(before, false);
-  if (!suspect.empty()) suspect.resize(before, false);
   features.keypoints.insert(features.keypoints.end(), extra.begin(), extra.end());
   cv::vconcat(features.descriptors, extra_desc, features.descriptors);
   drop.resize(features.keypoints.size(), false);
