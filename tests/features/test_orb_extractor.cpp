@@ -186,6 +186,60 @@ TEST(OrbExtractor, MaskIsRespected) {
   EXPECT_THROW(run(orb, img, cv::Mat(10, 10, CV_8UC1)), sp::Error);
 }
 
+// Re-selection among the first pass's corners: with nothing masked and the whole budget it must
+// reproduce the first pass exactly (same candidates, same blurred level, same descriptors); with a
+// mask and a smaller budget it stays out of the mask and within the budget, and its descriptors are
+// those a fresh extraction computes at the same keypoints.
+TEST(OrbExtractor, ExtractAgainReusingCorners) {
+  SP_REQUIRE_SHARED(kFrames);
+  const cv::Mat img = load_frame(3);
+  ASSERT_FALSE(img.empty());
+  OrbExtractor orb(OrbConfig{});
+  const Extracted first = run(orb, img);
+  Extracted again;
+  const cv::Mat open(img.size(), CV_8UC1, cv::Scalar(255));
+  orb.extract_again(open, again.kps, again.desc, {});
+  ASSERT_EQ(first.kps.size(), again.kps.size());
+  for (std::size_t i = 0; i < first.kps.size(); ++i) {
+    EXPECT_EQ(first.kps[i].pt, again.kps[i].pt);
+    EXPECT_EQ(first.kps[i].angle, again.kps[i].angle);
+  }
+  EXPECT_EQ(cv::norm(first.desc, again.desc, cv::NORM_L1), 0.0);
+
+  cv::Mat mask = open.clone();
+  const cv::Rect blocked(100, 80, 300, 250);
+  mask(blocked).setTo(0);
+  OrbExtractor::AgainOptions options;
+  options.max_keypoints = 300;
+  orb.extract_again(mask, again.kps, again.desc, options);
+  EXPECT_LE(again.kps.size(), 305u);  // per-level rounding
+  EXPECT_GT(again.kps.size(), 200u) << "the unmasked part of the frame has corners to spare";
+  ASSERT_EQ(again.desc.rows, static_cast<int>(again.kps.size()));
+  // Every re-selected keypoint is one of the first pass's candidates: a fresh extraction outside the
+  // same mask with a whole budget finds it with the same descriptor.
+  OrbExtractor fresh(OrbConfig{});
+  Extracted all;
+  fresh.extract(img, all.kps, all.desc, mask);
+  std::size_t found = 0;
+  for (std::size_t i = 0; i < again.kps.size(); ++i) {
+    const cv::KeyPoint& k = again.kps[i];
+    ASSERT_FALSE(blocked.contains({static_cast<int>(std::lround(k.pt.x)), static_cast<int>(std::lround(k.pt.y))}))
+        << k.pt;
+    for (std::size_t j = 0; j < all.kps.size(); ++j) {
+      if (all.kps[j].octave == k.octave && cv::norm(all.kps[j].pt - k.pt) < 1e-3) {
+        EXPECT_EQ(cv::norm(again.desc.row(static_cast<int>(i)), all.desc.row(static_cast<int>(j)), cv::NORM_HAMMING),
+                  0.0);
+        ++found;
+        break;
+      }
+    }
+  }
+  // The fresh pass may retry emptied cells with the low FAST threshold and select differently, so
+  // most, not all, re-selected keypoints appear in it.
+  EXPECT_GT(found, again.kps.size() / 2);
+  EXPECT_THROW(orb.extract_again(mask, again.kps, again.desc, {.max_keypoints = -1}), sp::Error);
+}
+
 TEST(OrbExtractor, DeterministicAndParallelIdentical) {
   SP_REQUIRE_SHARED(kFrames);
   const cv::Mat img = load_frame(5);

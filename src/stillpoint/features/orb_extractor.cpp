@@ -191,16 +191,26 @@ void OrbExtractor::build_pyramid(const cv::Mat& gray) {
   }
 }
 
+bool OrbExtractor::level_usable(std::size_t l, int quota) const {
+  // Below the patch size a level can hold no usable keypoint.
+  return level_size_[l].width >= kPatchSize && level_size_[l].height >= kPatchSize && quota > 0;
+}
+
 void OrbExtractor::process_level(int level, const cv::Mat& mask) {
   const auto l = static_cast<std::size_t>(level);
-  std::vector<cv::KeyPoint>& result = level_kps_[l];
-  result.clear();
-  const int w = level_size_[l].width, h = level_size_[l].height;
-  // Below the patch size a level can hold no usable keypoint.
-  if (w < kPatchSize || h < kPatchSize || per_level_[l] == 0) {
+  if (!level_usable(l, per_level_[l])) {
+    level_kps_[l].clear();
     level_desc_[l].release();
+    scratch_[l].found.clear();
     return;
   }
+  detect_level(level, mask);
+  describe_level(level, scratch_[l].found, per_level_[l], true);
+}
+
+void OrbExtractor::detect_level(int level, const cv::Mat& mask) {
+  const auto l = static_cast<std::size_t>(level);
+  const int w = level_size_[l].width, h = level_size_[l].height;
   const cv::Mat img = level_image(level);
   const float scale = static_cast<float>(scale_[l]);
   const auto masked_out = [&](const cv::Point2f& p) {
@@ -252,8 +262,15 @@ void OrbExtractor::process_level(int level, const cv::Mat& mask) {
     }
   }
 
-  distribute_quadtree(found, per_level_[l], 0.f, 0.f, static_cast<float>(w), static_cast<float>(h), result,
-                      sc.quadtree);
+}
+
+void OrbExtractor::describe_level(int level, const std::vector<cv::KeyPoint>& candidates, int quota, bool blur) {
+  const auto l = static_cast<std::size_t>(level);
+  const int w = level_size_[l].width, h = level_size_[l].height;
+  std::vector<cv::KeyPoint>& result = level_kps_[l];
+  distribute_quadtree(candidates, quota, 0.f, 0.f, static_cast<float>(w), static_cast<float>(h), result,
+                      scratch_[l].quadtree);
+  const float scale = static_cast<float>(scale_[l]);
 
   // Orientation on the sharp level image, descriptors on the blurred one (both padded by kEdge).
   const int step = static_cast<int>(padded_[l].step);
@@ -264,11 +281,13 @@ void OrbExtractor::process_level(int level, const cv::Mat& mask) {
   }
   // Blur only the region the pattern reaches; as a non-isolated ROI the kernel still reads the
   // padding, so the values equal those of blurring the whole padded image.
-  const int m = OrbPattern::kRadius + 1;
-  blurred_[l].create(padded_[l].size(), CV_8UC1);
-  const cv::Rect reach(kEdge - m, kEdge - m, w + 2 * m, h + 2 * m);
-  cv::Mat blur_dst = blurred_[l](reach);
-  cv::GaussianBlur(padded_[l](reach), blur_dst, cv::Size(7, 7), 2, 2, cv::BORDER_REFLECT_101);
+  if (blur) {
+    const int m = OrbPattern::kRadius + 1;
+    blurred_[l].create(padded_[l].size(), CV_8UC1);
+    const cv::Rect reach(kEdge - m, kEdge - m, w + 2 * m, h + 2 * m);
+    cv::Mat blur_dst = blurred_[l](reach);
+    cv::GaussianBlur(padded_[l](reach), blur_dst, cv::Size(7, 7), 2, 2, cv::BORDER_REFLECT_101);
+  }
   level_desc_[l].create(static_cast<int>(result.size()), 32, CV_8UC1);
   const int bstep = static_cast<int>(blurred_[l].step);
   const std::uint8_t* borigin = blurred_[l].ptr<std::uint8_t>(kEdge) + kEdge;
@@ -294,25 +313,64 @@ void OrbExtractor::extract(const cv::Mat& gray, std::vector<cv::KeyPoint>& keypo
   detect_and_describe(mask, keypoints, descriptors);
 }
 
-void OrbExtractor::extract_again(const cv::Mat& mask, std::vector<cv::KeyPoint>& keypoints,
-                                 cv::Mat& descriptors) {
+void OrbExtractor::extract_again(const cv::Mat& mask, std::vector<cv::KeyPoint>& keypoints, cv::Mat& descriptors,
+                                 const AgainOptions& options) {
   if (level_size_.empty()) throw sp::Error("OrbExtractor::extract_again: no extract() call before");
   if (mask.empty() || mask.type() != CV_8UC1 || mask.size() != level_size_[0]) {
     throw sp::Error("OrbExtractor::extract_again: mask must be CV_8UC1 of the image size");
   }
-  detect_and_describe(mask, keypoints, descriptors);
+  if (options.max_keypoints < 0) throw sp::Error("OrbExtractor::extract_again: max_keypoints must be >= 0");
+  // A smaller budget keeps each level's share of it.
+  const double share = options.max_keypoints > 0 && options.max_keypoints < config_.n_features
+                           ? static_cast<double>(options.max_keypoints) / config_.n_features
+                           : 1.0;
+  for_each_level([&](int level) {
+    const auto l = static_cast<std::size_t>(level);
+    const int quota = static_cast<int>(std::lround(per_level_[l] * share));
+    if (!level_usable(l, quota)) {
+      level_kps_[l].clear();
+      level_desc_[l].release();
+      return;
+    }
+    LevelScratch& sc = scratch_[l];
+    if (!options.reuse_detections) {
+      detect_level(level, mask);
+      describe_level(level, sc.found, quota, true);
+      return;
+    }
+    // The corners FAST found on this pyramid are still valid: keep those outside the mask, and the
+    // blurred level too; only the selection and the descriptors are new.
+    const float scale = static_cast<float>(scale_[l]);
+    sc.cell_found.clear();
+    for (const cv::KeyPoint& k : sc.found) {
+      const int x = std::min(mask.cols - 1, static_cast<int>(std::lround(k.pt.x * scale)));
+      const int y = std::min(mask.rows - 1, static_cast<int>(std::lround(k.pt.y * scale)));
+      if (mask.at<std::uint8_t>(y, x) != 0) sc.cell_found.push_back(k);
+    }
+    describe_level(level, sc.cell_found, quota, blurred_[l].empty());
+  });
+  collect(keypoints, descriptors);
+}
+
+template <typename F>
+void OrbExtractor::for_each_level(F&& work) {
+  if (config_.parallel_levels) {
+    // Each level writes only its own buffers, so the result does not depend on scheduling.
+    cv::parallel_for_(cv::Range(0, config_.n_levels), [&](const cv::Range& r) {
+      for (int l = r.start; l < r.end; ++l) work(l);
+    });
+  } else {
+    for (int l = 0; l < config_.n_levels; ++l) work(l);
+  }
 }
 
 void OrbExtractor::detect_and_describe(const cv::Mat& mask, std::vector<cv::KeyPoint>& keypoints,
                                        cv::Mat& descriptors) {
-  if (config_.parallel_levels) {
-    // Each level writes only its own buffers, so the result does not depend on scheduling.
-    cv::parallel_for_(cv::Range(0, config_.n_levels), [&](const cv::Range& r) {
-      for (int l = r.start; l < r.end; ++l) process_level(l, mask);
-    });
-  } else {
-    for (int l = 0; l < config_.n_levels; ++l) process_level(l, mask);
-  }
+  for_each_level([&](int level) { process_level(level, mask); });
+  collect(keypoints, descriptors);
+}
+
+void OrbExtractor::collect(std::vector<cv::KeyPoint>& keypoints, cv::Mat& descriptors) const {
   std::size_t total = 0;
   for (const auto& v : level_kps_) total += v.size();
   keypoints.clear();

@@ -47,9 +47,19 @@ class OrbExtractor {
   // descriptors: N x 32 CV_8U, row i belongs to keypoints[i]. Output is deterministic.
   void extract(const cv::Mat& gray, std::vector<cv::KeyPoint>& keypoints, cv::Mat& descriptors,
                const cv::Mat& mask = cv::Mat());
+  struct AgainOptions {
+    int max_keypoints = 0;  // budget of the new selection; 0 = n_features
+    // Select among the corners the last extract() found (cheap: no FAST, no blur) rather than
+    // running FAST again under the mask.
+    bool reuse_detections = true;
+  };
   // Detection again on the pyramid of the last extract() call (not rebuilt), only where mask != 0:
-  // the whole keypoint budget goes to the unmasked area. Throws when extract() was not called.
-  void extract_again(const cv::Mat& mask, std::vector<cv::KeyPoint>& keypoints, cv::Mat& descriptors);
+  // the keypoint budget goes to the unmasked area. Throws when extract() was not called.
+  void extract_again(const cv::Mat& mask, std::vector<cv::KeyPoint>& keypoints, cv::Mat& descriptors,
+                     const AgainOptions& options);
+  void extract_again(const cv::Mat& mask, std::vector<cv::KeyPoint>& keypoints, cv::Mat& descriptors) {
+    extract_again(mask, keypoints, descriptors, AgainOptions{});
+  }
 
   [[nodiscard]] int levels() const noexcept { return config_.n_levels; }
   [[nodiscard]] double scale_factor() const noexcept { return config_.scale_factor; }
@@ -66,8 +76,17 @@ class OrbExtractor {
 
  private:
   void build_pyramid(const cv::Mat& gray);
+  [[nodiscard]] bool level_usable(std::size_t level, int quota) const;
   void process_level(int level, const cv::Mat& mask);
+  // FAST corners of one level (outside the mask) into its scratch `found`.
+  void detect_level(int level, const cv::Mat& mask);
+  // Selects `quota` of the candidates, orients and describes them (blur: the level's blurred copy
+  // is rebuilt first).
+  void describe_level(int level, const std::vector<cv::KeyPoint>& candidates, int quota, bool blur);
+  template <typename F>
+  void for_each_level(F&& work);
   void detect_and_describe(const cv::Mat& mask, std::vector<cv::KeyPoint>& keypoints, cv::Mat& descriptors);
+  void collect(std::vector<cv::KeyPoint>& keypoints, cv::Mat& descriptors) const;
 
   OrbConfig config_;
   std::vector<double> scale_, inv_scale_, sigma2_, inv_sigma2_;

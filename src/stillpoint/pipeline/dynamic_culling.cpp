@@ -15,6 +15,8 @@ DynamicConfig DynamicConfig::from_yaml(const ConfigReader& r) {
   r.read("detector_interval", c.detector_interval, 1, 100);
   r.read("detector_nice", c.detector_nice, 0, 19);
   r.read("refill_share", c.refill_share, 0.0, 1.0);
+  r.read("refill_budget", c.refill_budget, 0.0, 10.0);
+  r.read("refill_reuse", c.refill_reuse);
   if (r.has("detector")) {
     c.detector = dyn::DetectorConfig::from_yaml(r.section("detector"));
     c.detector_configured = true;

@@ -25,7 +25,8 @@ ExtractedFeatures FrontEnd::extract(const io::FrameData& data) {
 }
 
 std::size_t FrontEnd::refill(ExtractedFeatures& features, std::vector<bool>& drop, std::vector<bool>& suspect,
-                             const std::vector<cv::Rect2f>& dynamic_boxes) {
+                             const std::vector<cv::Rect2f>& dynamic_boxes,
+                             const feat::OrbExtractor::AgainOptions& options) {
   cv::Mat mask(features.gray.size(), CV_8UC1, cv::Scalar(255));
   for (const cv::Rect2f& b : dynamic_boxes) {
     cv::rectangle(
@@ -45,7 +46,7 @@ std::size_t FrontEnd::refill(ExtractedFeatures& features, std::vector<bool>& dro
   }
   std::vector<cv::KeyPoint> extra;
   cv::Mat extra_desc;
-  extractor_.extract_again(mask, extra, extra_desc);
+  extractor_.extract_again(mask, extra, extra_desc, options);
   if (extra.empty()) return 0;
   features.keypoints.insert(features.keypoints.end(), extra.begin(), extra.end());
   cv::vconcat(features.descriptors, extra_desc, features.descriptors);

@@ -24,7 +24,8 @@ class FrontEnd {
   // the same pyramid, away from dynamic boxes, removed features and kept ones, and appends what it finds
   // (flagged keep / not suspect in `drop` / `suspect`). Returns how many were added.
   std::size_t refill(ExtractedFeatures& features, std::vector<bool>& drop, std::vector<bool>& suspect,
-                     const std::vector<cv::Rect2f>& dynamic_boxes);
+                     const std::vector<cv::Rect2f>& dynamic_boxes,
+                     const feat::OrbExtractor::AgainOptions& options = {});
   // Builds the tracker's frame; features flagged in `drop` (dynamic) are removed, those flagged in
   // `suspect` (kept, but near a detected object) are marked for the tracker's pose guard.
   track::Frame assemble(const io::FrameData& data, ExtractedFeatures features, const std::vector<bool>& drop,

@@ -315,7 +315,11 @@ FrameReport SlamSystem::process(const io::FrameData& data) {
     for (std::size_t b = 0; b < culled.result.boxes.size(); ++b)
       if (b < culled.result.box_dynamic.size() && culled.result.box_dynamic[b])
         boxes.push_back(culled.result.boxes[b].box);
-    refilled_total_ += frontend_.refill(features, dynamic, suspect, boxes);
+    feat::OrbExtractor::AgainOptions again;
+    again.max_keypoints = static_cast<int>(
+        std::lround(config_.dynamic.refill_budget * static_cast<double>(culled_points.size())));
+    again.reuse_detections = config_.dynamic.refill_reuse;
+    refilled_total_ += frontend_.refill(features, dynamic, suspect, boxes, again);
     times_.add("refill", watch.elapsed_ms());
   }
   track::Frame frame = frontend_.assemble(data, std::move(features), dynamic, suspect);
