@@ -223,11 +223,13 @@ TEST(OrbExtractor, ExtractAgainReusingCorners) {
   std::size_t found = 0;
   for (std::size_t i = 0; i < again.kps.size(); ++i) {
     const cv::KeyPoint& k = again.kps[i];
-    ASSERT_FALSE(blocked.contains({static_cast<int>(std::lround(k.pt.x)), static_cast<int>(std::lround(k.pt.y))}))
+    ASSERT_FALSE(
+        blocked.contains({static_cast<int>(std::lround(k.pt.x)), static_cast<int>(std::lround(k.pt.y))}))
         << k.pt;
     for (std::size_t j = 0; j < all.kps.size(); ++j) {
       if (all.kps[j].octave == k.octave && cv::norm(all.kps[j].pt - k.pt) < 1e-3) {
-        EXPECT_EQ(cv::norm(again.desc.row(static_cast<int>(i)), all.desc.row(static_cast<int>(j)), cv::NORM_HAMMING),
+        EXPECT_EQ(cv::norm(again.desc.row(static_cast<int>(i)), all.desc.row(static_cast<int>(j)),
+                           cv::NORM_HAMMING),
                   0.0);
         ++found;
         break;

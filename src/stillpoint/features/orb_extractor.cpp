@@ -261,10 +261,10 @@ void OrbExtractor::detect_level(int level, const cv::Mat& mask) {
       }
     }
   }
-
 }
 
-void OrbExtractor::describe_level(int level, const std::vector<cv::KeyPoint>& candidates, int quota, bool blur) {
+void OrbExtractor::describe_level(int level, const std::vector<cv::KeyPoint>& candidates, int quota,
+                                  bool blur) {
   const auto l = static_cast<std::size_t>(level);
   const int w = level_size_[l].width, h = level_size_[l].height;
   std::vector<cv::KeyPoint>& result = level_kps_[l];
@@ -313,8 +313,8 @@ void OrbExtractor::extract(const cv::Mat& gray, std::vector<cv::KeyPoint>& keypo
   detect_and_describe(mask, keypoints, descriptors);
 }
 
-void OrbExtractor::extract_again(const cv::Mat& mask, std::vector<cv::KeyPoint>& keypoints, cv::Mat& descriptors,
-                                 const AgainOptions& options) {
+void OrbExtractor::extract_again(const cv::Mat& mask, std::vector<cv::KeyPoint>& keypoints,
+                                 cv::Mat& descriptors, const AgainOptions& options) {
   if (level_size_.empty()) throw sp::Error("OrbExtractor::extract_again: no extract() call before");
   if (mask.empty() || mask.type() != CV_8UC1 || mask.size() != level_size_[0]) {
     throw sp::Error("OrbExtractor::extract_again: mask must be CV_8UC1 of the image size");

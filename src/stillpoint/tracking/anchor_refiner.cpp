@@ -18,6 +18,7 @@ AnchorRefinerConfig AnchorRefinerConfig::from_yaml(const ConfigReader& r) {
   r.read("max_view_change_deg", c.max_view_change_deg, 0.0, 90.0);
   r.read("max_error", c.max_error, 0.1, 255.0);
   r.read("level0_weight", c.level0_weight);
+  r.read("refined_weight", c.refined_weight, 0.1, 100.0);
   r.read("max_round_trip", c.max_round_trip, 0.0, 10.0);
   r.read("skip_suspect", c.skip_suspect);
   return c;

@@ -33,6 +33,7 @@ struct AnchorRefinerConfig {
   double max_round_trip = 0.0;       // px, aligned back onto the anchor it must land this close (0: no check)
   bool skip_suspect = true;          // features near detected objects or moving flow keep their detection
   bool level0_weight = true;         // refined features weighted as level 0 in pose optimisation
+  double refined_weight = 1.0;       // ... times this (LK positions are more precise than detections)
   static AnchorRefinerConfig from_yaml(const ConfigReader& r);
 };
 

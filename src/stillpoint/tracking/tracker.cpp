@@ -251,7 +251,7 @@ int Tracker::optimize_pose(map::MapView& view, Frame& frame) {
     o.uv = {kp.pt.x, kp.pt.y};
     o.u_right = frame.features.u_right[i];
     o.inv_sigma2 = refined_.size() == frame.points.size() && refined_[i] && config_.subpixel.level0_weight
-                       ? 1.0
+                       ? config_.subpixel.refined_weight
                        : pyramid_.inv_level_sigma2[static_cast<std::size_t>(kp.octave)];
     obs.push_back(o);
     feature_of.push_back(i);
