@@ -72,6 +72,36 @@ TEST(AsyncDetector, WaitForReturnsTheLatestWhenTheBudgetRunsOut) {
   EXPECT_EQ(d->frame_index, 0u);
 }
 
+// A detector slower than the frame rate falls behind; with a maximum age the caller waits until a
+// detection at most that old exists, without one it takes whatever is newest at once.
+TEST(AsyncDetector, WaitForFreshBoundsTheAgeOfTheDetectionUsed) {
+  SlowFake fake{200ms};  // long, so a loaded test machine does not reorder the steps below
+  AsyncDetector a(fake, AsyncDetector::Mode::kAsync);
+  a.submit(0, 0.0, frame(0));
+  ASSERT_TRUE(a.wait_for(0, 5s).has_value());
+  // Frames 3 and 6 submitted back to back: the worker is busy with 3 when frame 9 asks.
+  a.submit(3, 3.0, frame(3));
+  std::this_thread::sleep_for(5ms);
+  a.submit(6, 6.0, frame(6));
+  const auto quick = a.wait_for_fresh(9, 0ms, 0, 5s);
+  ASSERT_TRUE(quick.detections.has_value());
+  EXPECT_LT(quick.detections->frame_index, 5u) << "no maximum age: the newest finished one, at once";
+  EXPECT_EQ(quick.stale_wait_ms, 0.0);
+  const auto fresh = a.wait_for_fresh(9, 0ms, 4, 5s);
+  ASSERT_TRUE(fresh.detections.has_value());
+  EXPECT_GE(fresh.detections->frame_index, 5u) << "at most 4 frames older than frame 9";
+  EXPECT_GT(fresh.stale_wait_ms, 10.0) << "it had to wait for the worker";
+  // Fresh enough already: no second wait.
+  const auto again = a.wait_for_fresh(9, 0ms, 4, 5s);
+  EXPECT_EQ(again.stale_wait_ms, 0.0);
+  // A bounded wait returns the newest available when the worker cannot deliver in time.
+  a.submit(30, 30.0, frame(30));
+  const auto bounded = a.wait_for_fresh(40, 0ms, 2, 1ms);
+  ASSERT_TRUE(bounded.detections.has_value());
+  EXPECT_LT(bounded.detections->frame_index, 38u);
+  EXPECT_LT(bounded.stale_wait_ms, 150.0);
+}
+
 TEST(AsyncDetector, StopMidRunFinishesCleanlyAndIgnoresLaterFrames) {
   SlowFake fake{100ms};
   auto a = std::make_unique<AsyncDetector>(fake, AsyncDetector::Mode::kAsync);

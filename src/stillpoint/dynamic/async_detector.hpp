@@ -43,6 +43,16 @@ class AsyncDetector {
   // returns the latest available one (possibly older; nullopt if none finished yet).
   std::optional<Detections> wait_for(std::size_t frame_index, std::chrono::milliseconds budget);
 
+  // wait_for(frame_index, budget); then, when the result is more than `max_age` frames older than
+  // frame_index (or none exists), waits up to `stale_wait` more for one at most that old: boxes too
+  // stale to carry by flow miss people who entered the view since. max_age 0: no second wait.
+  struct Fresh {
+    std::optional<Detections> detections;
+    double stale_wait_ms = 0;  // time spent in the second wait
+  };
+  Fresh wait_for_fresh(std::size_t frame_index, std::chrono::milliseconds budget, std::size_t max_age,
+                       std::chrono::milliseconds stale_wait);
+
   // Finishes the frame in progress (cv::dnn cannot be interrupted), drops pending ones and joins.
   // Idempotent; the destructor calls it.
   void stop();

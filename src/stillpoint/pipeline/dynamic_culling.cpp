@@ -15,6 +15,8 @@ DynamicConfig DynamicConfig::from_yaml(const ConfigReader& r) {
   r.read("detector_interval", c.detector_interval, 1, 100);
   r.read("detector_nice", c.detector_nice, 0, 19);
   r.read("refill_share", c.refill_share, 0.0, 1.0);
+  r.read("max_detection_age", c.max_detection_age, 0, 1000);
+  r.read("stale_wait_ms", c.stale_wait_ms, 0.0, 10000.0);
   r.read("refill_budget", c.refill_budget, 0.0, 10.0);
   r.read("refill_reuse", c.refill_reuse);
   if (r.has("detector")) {
@@ -53,7 +55,9 @@ DynamicCulling::DynamicCulling(const DynamicConfig& config, const geo::CameraInt
                                const std::filesystem::path& project_root)
     : mode_(config.resolved_mode()),
       budget_ms_(config.detector_budget_ms),
-      interval_(config.detector_interval) {
+      interval_(config.detector_interval),
+      max_detection_age_(config.max_detection_age),
+      stale_wait_ms_(config.stale_wait_ms) {
   K_ << camera.fx, 0, camera.cx, 0, camera.fy, camera.cy, 0, 0, 1;
   if (mode_ == "off") return;
   if (mode_ == "detector" || mode_ == "detector+flow") {
@@ -100,7 +104,12 @@ CullingOutput DynamicCulling::process(const io::FrameData& data, const cv::Mat& 
   }
   std::optional<dyn::Detections> detections;
   if (detector_) {
-    detections = detector_->wait_for(data.index, std::chrono::milliseconds(static_cast<int>(budget_ms_)));
+    auto fresh =
+        detector_->wait_for_fresh(data.index, std::chrono::milliseconds(static_cast<int>(budget_ms_)),
+                                  static_cast<std::size_t>(max_detection_age_),
+                                  std::chrono::milliseconds(static_cast<int>(stale_wait_ms_)));
+    detections = std::move(fresh.detections);
+    out.stale_wait_ms = fresh.stale_wait_ms;
   } else if (oracle_) {
     detections = oracle_->at(data.stamp, data.index);
   }

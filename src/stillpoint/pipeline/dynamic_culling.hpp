@@ -30,6 +30,11 @@ struct DynamicConfig {
   // the moving objects so the static part gets the keypoint budget (a person filling the view of a
   // bare room left too few features to start the map). 0: never.
   double refill_share = 0.3;
+  // A detection older than this many frames is too stale to carry (a person entering the view is in
+  // no box yet): tracking then waits up to stale_wait_ms for a newer one. Only a detector falling
+  // behind (a loaded CPU) makes detections this old. 0: never wait.
+  int max_detection_age = 4;
+  double stale_wait_ms = 200.0;
   // Refill at most this many times the removed feature count (the frame regains about its ORB budget
   // and tracking does not pay for surplus features); 0: a whole n_features budget.
   double refill_budget = 1.0;
@@ -49,6 +54,7 @@ struct CullingOutput {
   dyn::DynamicResult result;
   double detector_ms = 0;  // inference time of the detection used (0 when none)
   bool detection_used = false;
+  double stale_wait_ms = 0;  // time spent waiting because the newest detection was too old
 };
 
 class DynamicCulling {
@@ -76,6 +82,8 @@ class DynamicCulling {
   std::string mode_;
   double budget_ms_;
   int interval_;
+  int max_detection_age_;
+  double stale_wait_ms_;
   Eigen::Matrix3d K_;
   std::filesystem::path model_file_;
   std::unique_ptr<dyn::AsyncDetector> detector_;

@@ -298,6 +298,7 @@ FrameReport SlamSystem::process(const io::FrameData& data) {
     culled = culling_.process(data, features.gray, features.keypoints, tracker_.predicted_motion());
     times_.add("dynamic", watch.elapsed_ms());
     if (culled.detection_used && culled.detector_ms > 0) times_.add("detector", culled.detector_ms);
+    if (culled.stale_wait_ms > 0) times_.add("stale_wait", culled.stale_wait_ms);
     dynamic = std::move(culled.drop);
     suspect = std::move(culled.suspect);
   }
