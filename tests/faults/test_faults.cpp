@@ -414,6 +414,36 @@ TEST_F(Faults, KidnappedCameraIsFoundAgain) {
   std::printf("[ reloc    ] kidnapped: %s\n", o.result.stats["relocalization"].dump().c_str());
 }
 
+// The start replayed at the end: the 150 frames, then frames 0-59 again (stamps going on at 30 Hz; the
+// camera jumps from the end of the path back to its start). Nothing in the replay is new, so the map
+// must take it as a revisit: the replayed frames tracked in the one map at their old places (ATE as
+// the other fault tests) and no keyframe made for a place the map already holds. The 150-frame run is
+// the baseline: deterministic, so the long run is the same up to frame 149 and the difference in
+// keyframes made is what the replay made.
+TEST_F(Faults, ReplayedStartIsTrackedInTheOneMapWithoutDuplicateKeyframes) {
+  const Sequence base_seq("replay_base", first(150));
+  const Outcome base = run(base_seq);
+  std::vector<std::size_t> order;
+  for (std::size_t i = 0; i < 150; ++i) order.push_back(i);
+  for (std::size_t i = 0; i < 60; ++i) order.push_back(i);
+  const Sequence seq("replayed_start", replayed(order));
+  const Outcome o = run(seq);
+  EXPECT_TRUE(o.result.completed);
+  EXPECT_EQ(o.frames(), 210);
+  EXPECT_EQ(o.tracked_in(seq, 0, 150), 150u);
+  EXPECT_GE(o.tracked_in(seq, 150, 210), 54u);
+  EXPECT_TRUE(o.tracked(seq.frames().back().rgb_stamp));
+  ASSERT_TRUE(o.result.ate_rmse.has_value());
+  EXPECT_LT(*o.result.ate_rmse, 0.02);
+  expect_database_matches_map(o.result.stats);
+  const int made =
+      o.result.stats["keyframes_created"].get<int>() - base.result.stats["keyframes_created"].get<int>();
+  const int live = o.result.stats["keyframes"].get<int>() - base.result.stats["keyframes"].get<int>();
+  std::printf("[ replay   ] keyframes made in the replay %d, live keyframes added %d, loops closed %d\n",
+              made, live, o.result.stats["loops_closed"].get<int>());
+  EXPECT_LE(live, 0);
+}
+
 // Timestamps that do not increase cannot be associated: the sequence is refused before the run, with
 // the file and line.
 void expect_refused(const Sequence& seq, int line, const std::string& what) {

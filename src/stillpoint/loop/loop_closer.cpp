@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <set>
 #include <unordered_map>
 #include <unordered_set>
 
@@ -180,7 +181,7 @@ void LoopCloser::process(map::KeyframeId kid) {
 void LoopCloser::handle_candidates(const std::vector<LoopCandidate>& candidates, map::KeyframeId kid) {
   for (const LoopCandidate& c : candidates) {
     spdlog::debug("loop candidate: keyframe {} -> {} (score {:.3f})", c.query, c.match, c.score);
-    const auto verified = verify(c.query, c.match);
+    auto verified = verify(c.query, c.match);
     if (!verified) continue;
     {
       std::lock_guard lock(stats_mutex_);
@@ -188,12 +189,13 @@ void LoopCloser::handle_candidates(const std::vector<LoopCandidate>& candidates,
     }
     spdlog::info("loop detected: keyframe {} revisits keyframe {} ({} inliers)", c.query, c.match,
                  verified->inliers);
+    const LoopClosure closure = verified->closure;
     Stopwatch correction;
-    correct(c.query, c.match, verified->T_query_w);
+    if (!correct(std::move(*verified))) continue;
     {
       std::lock_guard lock(stats_mutex_);
       ++stats_.loops_closed;
-      stats_.closures.push_back(verified->closure);
+      stats_.closures.push_back(closure);
       stats_.correction_ms_total += correction.elapsed_ms();
     }
     last_loop_keyframe_ = kid;
@@ -201,7 +203,7 @@ void LoopCloser::handle_candidates(const std::vector<LoopCandidate>& candidates,
   }
 }
 
-std::optional<LoopCloser::Verified> LoopCloser::verify(map::KeyframeId query, map::KeyframeId match) {
+std::optional<LoopCloser::VerifiedLoop> LoopCloser::verify(map::KeyframeId query, map::KeyframeId match) {
   map::MapView view = map_.view();
   const map::Keyframe* q = view.keyframe(query);
   const map::Keyframe* m = view.keyframe(match);
@@ -318,7 +320,16 @@ std::optional<LoopCloser::Verified> LoopCloser::verify(map::KeyframeId query, ma
       return std::nullopt;
     }
   }
-  return Verified{T, inliers, LoopClosure{q->stamp, m->stamp, T * m->T_cw.inverse(), inliers}};
+  VerifiedLoop loop{query,
+                    match,
+                    T,
+                    inliers,
+                    LoopClosure{q->stamp, m->stamp, T * m->T_cw.inverse(), inliers},
+                    map::KeyframeHold(map_)};
+  // Held until correct() is done with them: local mapping may cull between the two views.
+  loop.hold.add(view, query);
+  loop.hold.add(view, match);
+  return loop;
 }
 
 int LoopCloser::project_and_refine(map::MapView& view, const map::Keyframe& kf,
@@ -346,7 +357,9 @@ int LoopCloser::project_and_refine(map::MapView& view, const map::Keyframe& kf,
   return result.inliers;
 }
 
-void LoopCloser::correct(map::KeyframeId query, map::KeyframeId match, const geo::SE3& T_query_w) {
+bool LoopCloser::correct(VerifiedLoop loop) {
+  const map::KeyframeId query = loop.query, match = loop.match;
+  const geo::SE3& T_query_w = loop.T_query_w;
   abort_global_ba_ = true;  // a newer loop makes a running global BA obsolete
   finish();
   abort_global_ba_ = false;
@@ -354,7 +367,11 @@ void LoopCloser::correct(map::KeyframeId query, map::KeyframeId match, const geo
   {
     map::MapView view = map_.view();
     map::Keyframe* q = view.keyframe(query);
-    if (q == nullptr || q->bad) return;
+    const map::Keyframe* m = view.keyframe(match);
+    if (q == nullptr || q->bad || m == nullptr || m->bad) {
+      loop.hold.release(view);
+      return false;
+    }
     // Poses before the correction: every old edge of the essential graph keeps its relative pose.
     std::unordered_map<map::KeyframeId, geo::SE3> old_pose;
     for (map::KeyframeId k : view.keyframe_ids_sorted()) old_pose[k] = view.keyframe(k)->T_cw;
@@ -365,13 +382,16 @@ void LoopCloser::correct(map::KeyframeId query, map::KeyframeId match, const geo
     const geo::SE3 T_wq_old = q->T_cw.inverse();
     std::unordered_map<map::KeyframeId, geo::SE3> corrected;
     for (map::KeyframeId k : group) corrected[k] = view.keyframe(k)->T_cw * T_wq_old * T_query_w;
-    std::unordered_set<map::PointId> moved;
+    // Each point is corrected once per loop, by the first group keyframe that sees it (ORB-SLAM's
+    // mnCorrectedByKF); step 4 moves it on with that keyframe, not with its reference keyframe, which
+    // may lie outside the group and would move it a second time.
+    std::unordered_map<map::PointId, map::KeyframeId> corrected_by;
     for (map::KeyframeId k : group) {
       map::Keyframe* kf = view.keyframe(k);
       const geo::SE3 delta = corrected[k].inverse() * kf->T_cw;  // old world -> corrected world
       for (map::PointId pid : kf->points) {
         map::MapPoint* p = pid == map::kNoPoint ? nullptr : view.live_point(pid);
-        if (p == nullptr || !moved.insert(p->id).second) continue;
+        if (p == nullptr || !corrected_by.emplace(p->id, k).second) continue;
         p->position = delta * p->position;
       }
     }
@@ -387,11 +407,24 @@ void LoopCloser::correct(map::KeyframeId query, map::KeyframeId match, const geo
         if (pid != map::kNoPoint && seen.insert(pid).second) loop_points.push_back(pid);
       }
     }
+    std::unordered_map<map::KeyframeId, std::map<map::KeyframeId, int>> links_before;
+    for (map::KeyframeId k : group) links_before[k] = view.keyframe(k)->covisibility;
     const track::MatchContext ctx{camera_, pyramid_, depth_.bf};
     for (map::KeyframeId k : group) track::fuse_into_keyframe(view, k, loop_points, 4.0, ctx);
     for (map::KeyframeId k : group) view.update_connections(k);
     view.keyframe(query)->loop_edges.insert(match);
     view.keyframe(match)->loop_edges.insert(query);
+    // Links the fusion made between the group and the rest of the map (ORB-SLAM's LoopConnections):
+    // they are the loop, so the pose graph measures them with the corrected poses. With the poses from
+    // before the correction they would hold the drift the loop is closing (before 2026-12-02 they did).
+    std::set<std::pair<map::KeyframeId, map::KeyframeId>> loop_links;
+    for (map::KeyframeId k : group) {
+      for (const auto& [other, w] : view.keyframe(k)->covisibility) {
+        if (links_before[k].contains(other) || std::find(group.begin(), group.end(), other) != group.end())
+          continue;
+        loop_links.insert(std::minmax(k, other));
+      }
+    }
 
     // 3. Pose graph over the essential graph: spanning tree, strong covisibility, loop edges.
     std::vector<opt::PoseGraphVertex> vertices;
@@ -409,7 +442,10 @@ void LoopCloser::correct(map::KeyframeId query, map::KeyframeId match, const geo
       }
       for (const auto& [other, w] : kf->covisibility) {
         if (other < k && w >= 100 && other != kf->parent && old_pose.contains(other)) {
-          edges.push_back({k, other, relative_old(k, other), 1.0});
+          edges.push_back({k, other,
+                           loop_links.contains({other, k}) ? kf->T_cw * view.keyframe(other)->T_cw.inverse()
+                                                           : relative_old(k, other),
+                           1.0});
         }
       }
       for (map::KeyframeId other : kf->loop_edges) {
@@ -430,21 +466,25 @@ void LoopCloser::correct(map::KeyframeId query, map::KeyframeId match, const geo
     opt::optimize_pose_graph(vertices, edges, opt::PoseGraphConfig{});
     for (const auto& v : vertices) view.keyframe(v.id)->T_cw = v.T_cw;
 
-    // 4. Points follow their reference keyframe.
+    // 4. Points follow the keyframe that corrected them in step 1, else their reference keyframe.
     for (const auto& [pid, p] : view.points()) {
       if (p.bad) continue;
-      const map::Keyframe* ref = view.keyframe(p.reference);
-      if (ref == nullptr || !before_graph.contains(p.reference)) continue;
+      const auto by = corrected_by.find(pid);
+      const map::KeyframeId anchor = by != corrected_by.end() ? by->second : p.reference;
+      const map::Keyframe* ref = view.keyframe(anchor);
+      if (ref == nullptr || !before_graph.contains(anchor)) continue;
       map::MapPoint* mp = view.point(pid);
-      mp->position = ref->T_cw.inverse() * (before_graph.at(p.reference) * mp->position);
+      mp->position = ref->T_cw.inverse() * (before_graph.at(anchor) * mp->position);
     }
     for (const auto& [pid, p] : view.points()) {
       if (!p.bad) view.update_point_normal_and_depth(pid, pyramid_);
     }
     map_.notify_big_change();
     changes = map_.big_change_count();
+    loop.hold.release(view);
   }
   if (config_.global_ba) start_global_ba(changes);
+  return true;
 }
 
 void LoopCloser::start_global_ba(std::uint64_t changes_at_start) {

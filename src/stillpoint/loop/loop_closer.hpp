@@ -13,6 +13,7 @@
 #include "stillpoint/loop/drift_limit.hpp"
 #include "stillpoint/loop/loop_detector.hpp"
 #include "stillpoint/loop/vocabulary.hpp"
+#include "stillpoint/map/keyframe_hold.hpp"
 #include "stillpoint/map/map.hpp"
 #include "stillpoint/optimize/bundle_adjustment.hpp"
 #include "stillpoint/tracking/frame.hpp"
@@ -103,18 +104,26 @@ class LoopCloser {
   [[nodiscard]] LoopClosingStats stats() const;
   [[nodiscard]] bool enabled() const { return detector_ != nullptr; }
 
- private:
-  struct Verified {
+  // A loop that passed geometric verification. It holds its query and match keyframes against
+  // culling until correct() has used them (verification and correction take separate map views).
+  struct VerifiedLoop {
+    map::KeyframeId query = map::kNoKeyframe, match = map::kNoKeyframe;
     geo::SE3 T_query_w;  // corrected pose of the query keyframe
     int inliers = 0;
     LoopClosure closure;  // what the benchmark checks against ground truth
+    map::KeyframeHold hold;
   };
+  // Geometric verification of one candidate pair (the steps of process(), usable on their own).
+  std::optional<VerifiedLoop> verify(map::KeyframeId query, map::KeyframeId match);
+  // Corrects the map for a verified loop (fusion, pose graph, points, then a global BA if configured)
+  // and releases its keyframes; false when the query was culled meanwhile (not possible while held).
+  bool correct(VerifiedLoop loop);
+
+ private:
   void handle_candidates(const std::vector<LoopCandidate>& candidates, map::KeyframeId kid);
-  std::optional<Verified> verify(map::KeyframeId query, map::KeyframeId match);
   // Projects the loop side's points into a keyframe at T_cw, refines T_cw on the matches; the inliers.
   int project_and_refine(map::MapView& view, const map::Keyframe& kf, const std::vector<map::PointId>& local,
                          geo::SE3& T_cw) const;
-  void correct(map::KeyframeId query, map::KeyframeId match, const geo::SE3& T_query_w);
   void start_global_ba(std::uint64_t changes_at_start);
   void run_global_ba(std::uint64_t changes_at_start);
 

@@ -29,7 +29,9 @@ struct Keyframe {
   std::set<KeyframeId> children;
   std::set<KeyframeId> loop_edges;
   bool bad = false;
-  bool protected_from_culling = false;
+  // > 0 while a stage keeps using this keyframe across views (a loop between verification and
+  // correction); MapView::erase_keyframe refuses it then. Taken and released through MapView.
+  int culling_holds = 0;
   geo::SE3 T_c_parent;  // set when the keyframe is culled, so frames that referenced it still resolve
   // Culled keyframes stay as slim records (pose, parent) for the trajectory; their features,
   // thumbnail and point slots are released by MapView::purge_bad once retired long enough.

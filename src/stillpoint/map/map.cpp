@@ -265,9 +265,23 @@ int MapView::weighted_observations(const MapPoint& p) const {
   return n;
 }
 
-void MapView::erase_keyframe(KeyframeId kid) {
+bool MapView::hold_keyframe(KeyframeId kid) {
   Keyframe* kf = keyframe(kid);
-  if (kf == nullptr || kf->bad || kf->parent == kNoKeyframe) return;  // the root keyframe stays
+  if (kf == nullptr || kf->bad) return false;
+  ++kf->culling_holds;
+  return true;
+}
+
+void MapView::release_keyframe(KeyframeId kid) {
+  Keyframe* kf = keyframe(kid);
+  if (kf == nullptr || kf->culling_holds <= 0) throw Error("map: release_keyframe without a hold");
+  --kf->culling_holds;
+}
+
+bool MapView::erase_keyframe(KeyframeId kid) {
+  Keyframe* kf = keyframe(kid);
+  // The root keyframe stays; a held one is still in use by another stage.
+  if (kf == nullptr || kf->bad || kf->parent == kNoKeyframe || kf->culling_holds > 0) return false;
   for (const auto& [other, w] : kf->covisibility) {
     if (Keyframe* o = keyframe(other)) o->covisibility.erase(kid);
   }
@@ -297,6 +311,7 @@ void MapView::erase_keyframe(KeyframeId kid) {
   kf->children.clear();
   kf->bad = true;
   kf->retired_at = map_.next_keyframe_id_;
+  return true;
 }
 
 const std::unordered_map<KeyframeId, Keyframe>& MapView::keyframes() const { return map_.keyframes_; }

@@ -31,8 +31,15 @@ class MapView {
 
   void add_observation(PointId p, KeyframeId kf, int feature);
   void erase_observation(PointId p, KeyframeId kf);
-  void erase_point(PointId p);         // marks bad and detaches from keyframes
-  void erase_keyframe(KeyframeId kf);  // marks bad, detaches, re-parents the spanning tree
+  void erase_point(PointId p);  // marks bad and detaches from keyframes
+  // Marks bad, detaches, re-parents the spanning tree. Refused (false) for the root keyframe, a held
+  // keyframe (hold_keyframe) and one already culled.
+  bool erase_keyframe(KeyframeId kf);
+  // Holds a live keyframe against culling (counted, so holds nest); false when it is missing or culled.
+  // A stage that verifies in one view and writes in a later one holds the keyframes it relies on, so
+  // local mapping cannot cull them in between. Prefer map::KeyframeHold, which releases for you.
+  bool hold_keyframe(KeyframeId kf);
+  void release_keyframe(KeyframeId kf);
   void replace_point(PointId old_id, PointId by);
 
   void update_point_descriptor(PointId p);

@@ -289,7 +289,8 @@ int LocalMapper::cull_keyframes(map::MapView& view, map::KeyframeId kid) {
   int culled = 0;
   for (map::KeyframeId k : view.best_covisibles(kid, std::numeric_limits<std::size_t>::max())) {
     map::Keyframe* kf = view.keyframe(k);
-    if (kf == nullptr || kf->bad || kf->parent == map::kNoKeyframe || kf->protected_from_culling) continue;
+    // A held keyframe is in use by loop closing (MapView::hold_keyframe).
+    if (kf == nullptr || kf->bad || kf->parent == map::kNoKeyframe || kf->culling_holds > 0) continue;
     int close = 0, redundant = 0;
     for (std::size_t i = 0; i < kf->points.size(); ++i) {
       const map::PointId pid = kf->points[i];
@@ -309,10 +310,7 @@ int LocalMapper::cull_keyframes(map::MapView& view, map::KeyframeId kid) {
       }
       if (others >= 3) ++redundant;
     }
-    if (close > 0 && redundant > config_.redundancy * close) {
-      view.erase_keyframe(k);
-      ++culled;
-    }
+    if (close > 0 && redundant > config_.redundancy * close && view.erase_keyframe(k)) ++culled;
   }
   return culled;
 }

@@ -1,0 +1,123 @@
+// The tracker on generated frames (tests/support/synthetic_map.hpp: exact projections of points with
+// unique descriptors, depth for each): it must recover known camera poses, against its own map along
+// a turning path and against a map it is given, where the first frame has to be found by
+// relocalisation. Exact data, so the bounds are the solver's tolerance, far below a pixel's worth.
+#include <gtest/gtest.h>
+
+#include "../support/synthetic_map.hpp"
+#include "stillpoint/tracking/tracker.hpp"
+
+namespace sp::track {
+namespace {
+
+// Walks along x and turns about y: 1 cm and 0.3 degrees a frame.
+geo::SE3 path_pose(std::size_t i) {
+  const double s = static_cast<double>(i);
+  return testing::camera_pose(Eigen::Vector3d(0.01 * s, 0.0, 0.0), 0.3 * s * M_PI / 180.0);
+}
+
+Frame make_frame(const testing::SyntheticScene& scene, const geo::SE3& T_cw, std::size_t index,
+                 const geo::CameraIntrinsics& cam, double bf) {
+  Frame f;
+  f.index = index;
+  f.stamp = static_cast<double>(index) / 30.0;
+  f.features = testing::observe(scene, T_cw, cam, bf).features;
+  f.extracted = f.features.size();
+  return f;
+}
+
+class TrackerTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    config_.keyframes.policy = "heuristic";
+    scene_ = testing::make_slab_scene(1500, 2.5, 1.8, 2.0, 4.0, 3);
+  }
+  std::unique_ptr<Tracker> make_tracker() {
+    return std::make_unique<Tracker>(map_, config_, cam_, depth_, pyramid_, 30.0);
+  }
+  // The written pose of a frame (camera to world), if any.
+  std::optional<geo::SE3> written(const Tracker& t, std::size_t index) {
+    map::MapView view = map_.view();
+    for (const auto& p : t.trajectory().resolve(view))
+      if (std::abs(p.stamp - static_cast<double>(index) / 30.0) < 1e-9) return p.T_wc;
+    return std::nullopt;
+  }
+
+  map::Map map_;
+  TrackerConfig config_;
+  geo::CameraIntrinsics cam_;
+  DepthModel depth_;
+  map::ScalePyramid pyramid_ = map::ScalePyramid::make(8, 1.2);
+  testing::SyntheticScene scene_;
+};
+
+TEST_F(TrackerTest, RecoversEveryPoseOfAKnownPath) {
+  auto t = make_tracker();
+  constexpr std::size_t kFrames = 60;
+  for (std::size_t i = 0; i < kFrames; ++i) {
+    Frame f = make_frame(scene_, path_pose(i), i, cam_, depth_.bf);
+    ASSERT_EQ(t->track(f, {}).state, TrackingState::Ok) << "frame " << i;
+  }
+  // The first frame is the map's origin, as the path's: poses compare without alignment.
+  for (std::size_t i = 0; i < kFrames; ++i) {
+    const auto T_wc = written(*t, i);
+    ASSERT_TRUE(T_wc.has_value()) << i;
+    const PoseDeviation d = pose_deviation(T_wc->inverse(), path_pose(i));
+    EXPECT_LT(d.translation_m, 1e-3) << "frame " << i;
+    EXPECT_LT(d.rotation_deg, 0.02) << "frame " << i;
+  }
+  EXPECT_EQ(t->lost_frames(), 0u);
+}
+
+TEST_F(TrackerTest, FindsItsPoseInAGivenMapAndTracksOn) {
+  // A map of five keyframes along x, made outside the tracker; the camera starts between two of them.
+  {
+    testing::SyntheticMapBuilder builder(map_, scene_, cam_, depth_.bf, 100);
+    for (int k = 0; k < 5; ++k) {
+      const geo::SE3 T = testing::camera_pose(Eigen::Vector3d(0.1 * k, 0, 0), 0.0);
+      builder.add(T, T);
+    }
+    builder.finish(pyramid_);
+  }
+  config_.relocalization_verify_frames = 0;  // the first pose is trusted at once
+  auto t = make_tracker();
+  t->start_in_existing_map();
+  const auto truth = [](std::size_t i) {
+    return testing::camera_pose(Eigen::Vector3d(0.23 + 0.01 * static_cast<double>(i), 0.02, 0.0), 0.01);
+  };
+  for (std::size_t i = 0; i < 10; ++i) {
+    Frame f = make_frame(scene_, truth(i), i, cam_, depth_.bf);
+    const TrackOutcome o = t->track(f, {});
+    ASSERT_EQ(o.state, TrackingState::Ok) << "frame " << i;
+    EXPECT_EQ(o.relocalized, i == 0) << "frame " << i;
+  }
+  for (std::size_t i = 0; i < 10; ++i) {
+    const auto T_wc = written(*t, i);
+    ASSERT_TRUE(T_wc.has_value()) << i;
+    const PoseDeviation d = pose_deviation(T_wc->inverse(), truth(i));
+    EXPECT_LT(d.translation_m, 1e-3) << "frame " << i;
+    EXPECT_LT(d.rotation_deg, 0.02) << "frame " << i;
+  }
+}
+
+TEST_F(TrackerTest, ASuddenStopIsTrackedAtTheTruePose) {
+  // 2 cm a frame, then the camera stops dead: the constant-velocity guess is 2 cm off (about 5 px at
+  // 2-4 m), which the tracker must absorb without losing the pose.
+  auto t = make_tracker();
+  const auto truth = [](std::size_t i) {
+    return testing::camera_pose(
+        Eigen::Vector3d(0.02 * static_cast<double>(std::min<std::size_t>(i, 15)), 0, 0), 0);
+  };
+  for (std::size_t i = 0; i < 20; ++i) {
+    Frame f = make_frame(scene_, truth(i), i, cam_, depth_.bf);
+    ASSERT_EQ(t->track(f, {}).state, TrackingState::Ok) << "frame " << i;
+  }
+  for (std::size_t i = 14; i < 20; ++i) {
+    const auto T_wc = written(*t, i);
+    ASSERT_TRUE(T_wc.has_value());
+    EXPECT_LT(pose_deviation(T_wc->inverse(), truth(i)).translation_m, 1e-3) << "frame " << i;
+  }
+}
+
+}  // namespace
+}  // namespace sp::track
