@@ -10,15 +10,19 @@
 #include <functional>
 
 #include "../support/shared_data.hpp"
+#include "stillpoint/api/runner.hpp"
 #include "stillpoint/common/error.hpp"
 #include "stillpoint/io/trajectory_io.hpp"
 #include "stillpoint/io/tum_sequence.hpp"
 #include "stillpoint/map/map_file.hpp"
-#include "stillpoint/pipeline/runner.hpp"
 #include "stillpoint/pipeline/slam_system.hpp"
 
 namespace sp::pipeline {
 namespace {
+
+using api::run_slam;  // stillpoint run's runner, on the public API
+using api::RunOptions;
+using api::RunResult;
 
 const std::filesystem::path kSequence =
     std::filesystem::path(SP_SHARED_DIR) / "data" / "dynsynth" / "office_a_walking_xyz_150";
