@@ -21,6 +21,7 @@
 #include <opencv2/core.hpp>
 #include <stdexcept>
 #include <string>
+#include <utility>
 #include <vector>
 
 #define STILLPOINT_API __attribute__((visibility("default")))
@@ -35,7 +36,16 @@ class SystemAccess;  // the stillpoint CLI's access to what the API does not exp
 // do not fit the camera, calls in the wrong state). The message names the file and line when there is one.
 class STILLPOINT_API Error : public std::runtime_error {
  public:
-  using std::runtime_error::runtime_error;
+  explicit Error(const std::string& what, std::string file = {}, int line = 0)
+      : std::runtime_error(what), file_(std::move(file)), line_(line) {}
+  // The input file at fault (a configuration, camera, map file) and its 1-based line; empty and 0
+  // when the error is not about a file's content, or the line is not known.
+  [[nodiscard]] const std::string& file() const noexcept { return file_; }
+  [[nodiscard]] int line() const noexcept { return line_; }
+
+ private:
+  std::string file_;
+  int line_ = 0;
 };
 
 // "0.1.0".

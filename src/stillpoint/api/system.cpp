@@ -25,13 +25,15 @@ namespace fs = std::filesystem;
 namespace {
 
 // Runs `f`, turning the implementation's errors into stillpoint::Error (sp::Error's type is hidden in
-// the library; the message is kept).
+// the library; the message, and an input error's file and line, are kept).
 template <typename F>
 auto guarded(F&& f) -> decltype(f()) {
   try {
     return f();
   } catch (const Error&) {
     throw;
+  } catch (const sp::InputError& e) {
+    throw Error(e.what(), e.file(), e.line());
   } catch (const sp::Error& e) {
     throw Error(e.what());
   }
