@@ -132,6 +132,17 @@ PYBIND11_MODULE(stillpoint, m) {
       .def_readonly("features", &TrackResult::features)
       .def_readonly("culled_features", &TrackResult::culled_features)
       .def_readonly("keyframe", &TrackResult::keyframe)
+      .def_property_readonly(
+          "culled_points",
+          [](const TrackResult& r) {
+            py::array_t<float> out({static_cast<py::ssize_t>(r.culled_points.size()), py::ssize_t{2}});
+            auto o = out.mutable_unchecked<2>();
+            for (std::size_t i = 0; i < r.culled_points.size(); ++i) {
+              o(static_cast<py::ssize_t>(i), 0) = r.culled_points[i].x;
+              o(static_cast<py::ssize_t>(i), 1) = r.culled_points[i].y;
+            }
+            return out;
+          })
       .def("__repr__", [](const TrackResult& r) {
         return std::string("TrackResult(state=") + stillpoint::to_string(r.state) +
                ", culled_features=" + std::to_string(r.culled_features) + ")";
@@ -169,6 +180,28 @@ PYBIND11_MODULE(stillpoint, m) {
           "trajectory", [](System& s) { return stack(s.trajectory()); },
           "(timestamps N, poses N x 4 x 4) of every tracked frame, map corrections applied")
       .def("keyframe_trajectory", [](System& s) { return stack(s.keyframe_trajectory()); })
+      .def(
+          "save_trajectory",
+          [](System& s, const std::filesystem::path& file, const std::string& format) {
+            if (format != "tum" && format != "kitti")
+              throw py::value_error("format must be 'tum' or 'kitti'");
+            s.save_trajectory(file, format == "tum" ? stillpoint::TrajectoryFormat::Tum
+                                                    : stillpoint::TrajectoryFormat::Kitti);
+          },
+          py::arg("file"), py::arg("format") = "tum",
+          "Writes trajectory(): 'tum', or 'kitti' (plus <stem>_times.txt beside it)")
+      .def("save_keyframe_trajectory", &System::save_keyframe_trajectory, py::arg("file"))
+      .def(
+          "map_points",
+          [](System& s, std::size_t max_points) {
+            const auto points = s.map_points(max_points);
+            py::array_t<float> out({static_cast<py::ssize_t>(points.size()), py::ssize_t{3}});
+            auto o = out.mutable_unchecked<2>();
+            for (std::size_t i = 0; i < points.size(); ++i)
+              for (int c = 0; c < 3; ++c) o(static_cast<py::ssize_t>(i), c) = points[i][c];
+            return out;
+          },
+          py::arg("max_points") = 0, "map point positions, N x 3 float32 (at most max_points; 0 = all)")
       .def("load_map", &System::load_map, py::arg("file"), py::call_guard<py::gil_scoped_release>())
       .def("save_map", &System::save_map, py::arg("file"), py::call_guard<py::gil_scoped_release>())
       .def("shutdown", &System::shutdown, py::call_guard<py::gil_scoped_release>())

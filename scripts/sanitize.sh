@@ -17,6 +17,10 @@
 # The place module (ParC_NetVLAD) links libtorch, which is not instrumented and whose training
 # tests would run for tens of minutes under a sanitizer; report needs npm + Chromium at build time.
 # Neither is on the threaded SLAM path (the netvlad loop detector is off by default).
+# Both builds are configured -DSTILLPOINT_WITH_TORCH=OFF (they never build place), so CI's ASan
+# build is also the build without libtorch (docs/library.md): the modules, the CLI and its API layer
+# built and tested without it, and its ctest must pass the no-torch checks (cli_version says
+# "without libtorch", cli_refuses_netvlad_without_torch), which the script checks ran.
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 MODE="${1:-all}"
@@ -118,7 +122,7 @@ for kind in "${MODES[@]}"; do
   # stack traces. NDEBUG as in Release, so the code under test is the shipped code.
   cmake -S "$ROOT" -B "$build" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
     -DCMAKE_CXX_COMPILER="$CXX_BIN" -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g1 -DNDEBUG" \
-    -DSP_SANITIZE="$kind" -DSP_ONLY_MODULES="$MODULES" >/dev/null
+    -DSP_SANITIZE="$kind" -DSP_ONLY_MODULES="$MODULES" -DSTILLPOINT_WITH_TORCH=OFF >/dev/null
   if [ ${#targets[@]} -gt 0 ]; then
     nice -n "$NICE" cmake --build "$build" -j "$JOBS" --target "${targets[@]}"
   else
@@ -138,6 +142,10 @@ for kind in "${MODES[@]}"; do
       fail "$kind OpenNI2 tests (see $build/ctest_noleak.log)"
     fi
     check_log "$build/ctest_noleak.log"
+    # The no-torch build's own checks (tests/install/CMakeLists.txt) ran and passed.
+    for t in cli_version cli_refuses_netvlad_without_torch; do
+      grep -Eq ": $t \.+ +Passed" "$log" || fail "$kind: the no-torch check $t did not pass (see $log)"
+    done
   fi
   t_tested=$SECONDS
   e2e_runs "$build" "$kind"

@@ -8,13 +8,14 @@
 #include <thread>
 
 #include "commands.hpp"
+#include "stillpoint/api/runner.hpp"
 #include "stillpoint/common/data_dir.hpp"
 #include "stillpoint/common/error.hpp"
 #include "stillpoint/io/camera_config.hpp"
 #include "stillpoint/io/openni2_source.hpp"
 #include "stillpoint/io/tum_sequence.hpp"
-#include "stillpoint/pipeline/runner.hpp"
 #include "stillpoint/pipeline/slam_system.hpp"
+#include "stillpoint/stillpoint.hpp"
 #ifdef SP_HAVE_LIVE_VIEW
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -89,12 +90,14 @@ std::string floats_base64(const std::vector<float>& v) {
 }
 
 // The map (up to 30000 points) and the keyframe positions, as one "map" event.
-void publish_map(report::LiveViewServer& server, pipeline::SlamSystem& system) {
+void publish_map(report::LiveViewServer& server, stillpoint::System& system) {
   std::vector<float> points, keyframes;
-  for (const auto& p : system.map_point_positions(30000)) points.insert(points.end(), {p.x(), p.y(), p.z()});
-  for (const auto& k : system.keyframe_trajectory())
+  for (const auto& p : system.map_points(30000)) points.insert(points.end(), {p.x(), p.y(), p.z()});
+  for (const auto& k : system.keyframe_trajectory()) {
+    const Eigen::Vector3d& t = k.T_world_camera.translation();
     keyframes.insert(keyframes.end(),
-                     {static_cast<float>(k.t.x()), static_cast<float>(k.t.y()), static_cast<float>(k.t.z())});
+                     {static_cast<float>(t.x()), static_cast<float>(t.y()), static_cast<float>(t.z())});
+  }
   server.publish("map", nlohmann::json{{"points", floats_base64(points)},
                                        {"count", points.size() / 3},
                                        {"keyframes", floats_base64(keyframes)},
@@ -104,16 +107,18 @@ void publish_map(report::LiveViewServer& server, pipeline::SlamSystem& system) {
 
 // Streams the run to a LiveViewServer (report/live_view.hpp): every pose, the map and keyframes after
 // each keyframe (and every 30 frames), the frame with its culled features every 3rd frame.
-void attach_live_view(report::LiveViewServer& server, pipeline::RunOptions& options) {
+void attach_live_view(report::LiveViewServer& server, api::RunOptions& options) {
   options.on_frame = [&server, frames = std::size_t{0}](const io::FrameData& f,
-                                                        const pipeline::FrameReport& r,
-                                                        pipeline::SlamSystem& system) mutable {
+                                                        const stillpoint::TrackResult& r,
+                                                        stillpoint::System& system) mutable {
     ++frames;
-    nlohmann::json pose = {
-        {"frame", f.index}, {"t", f.stamp}, {"state", track::to_string(r.state)}, {"culled", r.culled}};
-    if (r.T_wc) {
-      const auto& t = r.T_wc->translation();
-      const auto& q = r.T_wc->quaternion();
+    nlohmann::json pose = {{"frame", f.index},
+                           {"t", f.stamp},
+                           {"state", stillpoint::to_string(r.state)},
+                           {"culled", r.culled_features}};
+    if (r.has_pose) {
+      const Eigen::Vector3d& t = r.T_world_camera.translation();
+      const Eigen::Quaterniond q(r.T_world_camera.rotation());
       pose["p"] = {t.x(), t.y(), t.z()};
       pose["q"] = {q.x(), q.y(), q.z(), q.w()};
     }
@@ -131,13 +136,13 @@ void attach_live_view(report::LiveViewServer& server, pipeline::RunOptions& opti
       server.publish("overlay",
                      nlohmann::json{{"jpeg", report::base64_encode(std::string_view(
                                                  reinterpret_cast<const char*>(jpeg.data()), jpeg.size()))},
-                                    {"culled", r.culled}}
+                                    {"culled", r.culled_features}}
                          .dump());
     }
   };
-  options.on_finish = [&server](pipeline::SlamSystem& system) {
+  options.on_finish = [&server](stillpoint::System& system) {
     publish_map(server, system);
-    const auto stats = system.statistics();
+    const auto stats = nlohmann::json::parse(system.statistics_json());
     server.publish("end", nlohmann::json{{"frames", stats.value("frames", 0)},
                                          {"tracked", stats.value("tracked_frames", 0)}}
                               .dump());
@@ -190,7 +195,7 @@ int run(const RunArgs& args) {
     config.dynamic.model = std::filesystem::absolute(args.detector_model).lexically_normal().string();
   if (!args.keyframe_policy.empty()) config.tracker.keyframes.policy = args.keyframe_policy;
   if (!args.loop_detector.empty()) config.loop.detector = args.loop_detector;
-  if (config.loop.detector == "netvlad" && !pipeline::has_place_recognition())
+  if (config.loop.detector == "netvlad" && !stillpoint::has_netvlad())
     throw Error(pipeline::netvlad_unavailable_message());
   InterruptWatcher interrupt;  // before any thread starts, so all threads inherit the blocked mask
   std::unique_ptr<io::FrameSource> source;
@@ -209,7 +214,7 @@ int run(const RunArgs& args) {
     source = std::move(sequence);
   }
 
-  pipeline::RunOptions options;
+  api::RunOptions options;
   options.out_dir = args.out;
   options.deterministic = args.deterministic;
   options.progress = !args.no_progress;
@@ -237,7 +242,7 @@ int run(const RunArgs& args) {
   options.extra_stats["dataset"] = dataset.string();
   options.extra_stats["config"] = config_file.string();
   if (!args.overrides.empty()) options.extra_stats["config_overrides"] = args.overrides;
-  const auto result = pipeline::run_slam(*source, config, options);
+  const auto result = api::run_slam(*source, config, options);
 
   const auto& s = result.stats;
   fmt::print("\n== StillPoint run: {} ==\n", dataset.filename().string());

@@ -8,6 +8,9 @@
 #include "stillpoint/common/error.hpp"
 #include "stillpoint/common/logging.hpp"
 #include "stillpoint/version.hpp"
+#ifdef SP_HAVE_CMD_RUN
+#include "stillpoint/stillpoint.hpp"
+#endif
 
 int main(int argc, char** argv) {
   CLI::App app{"StillPoint: RGB-D visual SLAM that keeps only the still points"};
@@ -43,6 +46,11 @@ int main(int argc, char** argv) {
   } catch (const sp::Error& e) {
     spdlog::error("{}", e.what());
     return 2;
+#ifdef SP_HAVE_CMD_RUN
+  } catch (const stillpoint::Error& e) {  // `run` goes through the public API, which has its own type
+    spdlog::error("{}", e.what());
+    return 2;
+#endif
   } catch (const std::exception& e) {
     spdlog::error("unexpected error: {}", e.what());
     return 3;

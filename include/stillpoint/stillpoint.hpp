@@ -21,17 +21,31 @@
 #include <opencv2/core.hpp>
 #include <stdexcept>
 #include <string>
+#include <utility>
 #include <vector>
 
 #define STILLPOINT_API __attribute__((visibility("default")))
 
 namespace stillpoint {
 
+namespace internal {
+class SystemAccess;  // the stillpoint CLI's access to what the API does not expose; not installed
+}  // namespace internal
+
 // Every error the API throws on purpose (bad configuration or camera file, unreadable map, images that
 // do not fit the camera, calls in the wrong state). The message names the file and line when there is one.
 class STILLPOINT_API Error : public std::runtime_error {
  public:
-  using std::runtime_error::runtime_error;
+  explicit Error(const std::string& what, std::string file = {}, int line = 0)
+      : std::runtime_error(what), file_(std::move(file)), line_(line) {}
+  // The input file at fault (a configuration, camera, map file) and its 1-based line; empty and 0
+  // when the error is not about a file's content, or the line is not known.
+  [[nodiscard]] const std::string& file() const noexcept { return file_; }
+  [[nodiscard]] int line() const noexcept { return line_; }
+
+ private:
+  std::string file_;
+  int line_ = 0;
 };
 
 // "0.1.0".
@@ -87,9 +101,10 @@ struct TrackResult {
   // The camera's pose in the world (map) frame as tracked now; later map corrections (local bundle
   // adjustment, loop closure) refine it: trajectory() returns the corrected poses.
   Eigen::Isometry3d T_world_camera = Eigen::Isometry3d::Identity();
-  std::size_t features = 0;         // ORB features the tracker used
-  std::size_t culled_features = 0;  // features dropped as dynamic (on moving people) in this frame
-  bool keyframe = false;            // this frame became a keyframe
+  std::size_t features = 0;                // ORB features the tracker used
+  std::size_t culled_features = 0;         // features dropped as dynamic (on moving people) in this frame
+  bool keyframe = false;                   // this frame became a keyframe
+  std::vector<cv::Point2f> culled_points;  // image positions (pixels) of the culled features
 };
 
 struct StampedPose {
@@ -108,6 +123,12 @@ struct LoopClosureEvent {
   double match_timestamp = 0;                                       // the earlier keyframe it recognised
   Eigen::Isometry3d T_query_match = Eigen::Isometry3d::Identity();  // verified relative pose
   int inliers = 0;
+};
+
+enum class TrajectoryFormat {
+  Tum,    // "t tx ty tz qx qy qz qw" a line (TUM RGB-D, evo --tum)
+  Kitti,  // KITTI odometry: T_world_camera's first three rows, 12 numbers a line; the timestamps go
+          // to <stem>_times.txt beside the file (like KITTI's times.txt)
 };
 
 class STILLPOINT_API System {
@@ -137,6 +158,13 @@ class STILLPOINT_API System {
   // against the current, corrected map.
   [[nodiscard]] std::vector<StampedPose> trajectory();
   [[nodiscard]] std::vector<StampedPose> keyframe_trajectory();
+  // Writes trajectory() (keyframe_trajectory(): TUM) to a file at full precision. Throws Error when
+  // the file cannot be written.
+  void save_trajectory(const std::filesystem::path& file, TrajectoryFormat format = TrajectoryFormat::Tum);
+  void save_keyframe_trajectory(const std::filesystem::path& file);
+  // Positions of the map's points in the world frame, at most `max_points` of them evenly subsampled
+  // (0 = all), for drawing the map.
+  [[nodiscard]] std::vector<Eigen::Vector3f> map_points(std::size_t max_points = 0);
 
   // Before the first frame: relocalise in a saved map and extend it (docs/map_files.md).
   void load_map(const std::filesystem::path& file);
@@ -153,7 +181,9 @@ class STILLPOINT_API System {
   [[nodiscard]] std::size_t frames() const;
 
  private:
+  friend class internal::SystemAccess;
   struct Impl;
+  explicit System(std::unique_ptr<Impl> impl);
   std::unique_ptr<Impl> impl_;
 };
 

@@ -72,8 +72,13 @@ def python_run():
         results.append(slam.track(color, raw, t))
     slam.shutdown()
     stamps, poses = slam.trajectory()
+    out = TMP / "python_demo"
+    out.mkdir(parents=True, exist_ok=True)
+    slam.save_trajectory(out / "trajectory.txt")
+    slam.save_trajectory(out / "trajectory_kitti.txt", "kitti")
     return {"results": results, "stamps": stamps, "poses": poses, "keyframes": keyframes,
-            "stats": slam.statistics(), "seq": seq}
+            "stats": slam.statistics(), "seq": seq, "out": out, "points": slam.map_points(),
+            "points_50": slam.map_points(50)}
 
 
 @pytest.fixture(scope="module")
@@ -106,6 +111,26 @@ def test_keyframes_and_culling(python_run):
     # Two people walk through the demo: the default detector + flow culling drops their features.
     assert sum(r.culled_features for r in results) > 0
     assert python_run["stats"]["culled_features_total"] == sum(r.culled_features for r in results)
+
+
+def test_culled_points_map_points_and_trajectory_files(python_run):
+    results = python_run["results"]
+    for r in results:
+        assert r.culled_points.shape == (r.culled_features, 2)
+        if r.culled_features:
+            assert np.all(r.culled_points >= 0)
+            assert np.all(r.culled_points < [640, 480])
+    assert python_run["points"].ndim == 2 and python_run["points"].shape[1] == 3
+    assert len(python_run["points"]) > 100
+    assert python_run["points_50"].shape == (50, 3)
+    # The files hold trajectory(): the TUM file the same stamps and positions, KITTI a 3 x 4 per pose.
+    stamps, poses, out = python_run["stamps"], python_run["poses"], python_run["out"]
+    tum = read_tum(out / "trajectory.txt")
+    np.testing.assert_allclose(tum[:, 0], stamps, atol=1e-6)
+    np.testing.assert_allclose(tum[:, 1:4], poses[:, :3, 3], atol=1e-6)
+    kitti = np.loadtxt(out / "trajectory_kitti.txt", ndmin=2)
+    np.testing.assert_allclose(kitti.reshape(-1, 3, 4), poses[:, :3, :], atol=1e-6)
+    np.testing.assert_allclose(np.loadtxt(out / "trajectory_kitti_times.txt", ndmin=1), stamps, atol=1e-6)
 
 
 def test_ate_and_agreement_with_the_cli(python_run, cli_run):

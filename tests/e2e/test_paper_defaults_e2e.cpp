@@ -6,11 +6,15 @@
 #include <filesystem>
 
 #include "../support/shared_data.hpp"
+#include "stillpoint/api/runner.hpp"
 #include "stillpoint/io/tum_sequence.hpp"
-#include "stillpoint/pipeline/runner.hpp"
 
 namespace sp::pipeline {
 namespace {
+
+using api::run_slam;  // stillpoint run's runner, on the public API
+using api::RunOptions;
+using api::RunResult;
 
 const std::filesystem::path kSequence =
     std::filesystem::path(SP_SHARED_DIR) / "data" / "dynsynth" / "office_a_walking_xyz_150";

@@ -8,11 +8,15 @@
 #include <sstream>
 
 #include "../support/shared_data.hpp"
+#include "stillpoint/api/runner.hpp"
 #include "stillpoint/io/tum_sequence.hpp"
-#include "stillpoint/pipeline/runner.hpp"
 
 namespace sp::pipeline {
 namespace {
+
+using api::run_slam;  // stillpoint run's runner, on the public API
+using api::RunOptions;
+using api::RunResult;
 
 const std::filesystem::path kData = std::filesystem::path(SP_SHARED_DIR) / "data" / "dynsynth";
 const std::filesystem::path kConfig = std::filesystem::path(SP_SOURCE_DIR) / "config" / "stillpoint.yaml";

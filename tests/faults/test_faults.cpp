@@ -18,16 +18,20 @@
 #include <vector>
 
 #include "../support/shared_data.hpp"
+#include "stillpoint/api/runner.hpp"
 #include "stillpoint/common/error.hpp"
 #include "stillpoint/io/fake_source.hpp"
 #include "stillpoint/io/openni2_source.hpp"
 #include "stillpoint/io/trajectory_io.hpp"
 #include "stillpoint/io/tum_sequence.hpp"
 #include "stillpoint/io/tum_text.hpp"
-#include "stillpoint/pipeline/runner.hpp"
 
 namespace sp::pipeline {
 namespace {
+
+using api::run_slam;  // stillpoint run's runner, on the public API
+using api::RunOptions;
+using api::RunResult;
 
 namespace fs = std::filesystem;
 

@@ -1,5 +1,6 @@
-// The public API (include/stillpoint/stillpoint.hpp) over pipeline::SlamSystem, the same system the
-// CLI's `run` drives: this file only converts images, poses and errors at the boundary.
+// The public API (include/stillpoint/stillpoint.hpp) over pipeline::SlamSystem: this file only
+// converts images, poses and errors at the boundary. The CLI's `run` drives this same class
+// (runner.cpp, through system_access.hpp for what the API does not expose).
 #include <dlfcn.h>
 
 #include <mutex>
@@ -7,13 +8,14 @@
 #include <optional>
 #include <utility>
 
+#include "stillpoint/api/system_impl.hpp"
 #include "stillpoint/common/data_dir.hpp"
 #include "stillpoint/common/error.hpp"
 #include "stillpoint/common/logging.hpp"
 #include "stillpoint/io/camera_config.hpp"
+#include "stillpoint/io/trajectory_io.hpp"
 #include "stillpoint/pipeline/slam_system.hpp"
 #include "stillpoint/pipeline/system_config.hpp"
-#include "stillpoint/stillpoint.hpp"
 #include "stillpoint/version.hpp"
 
 namespace stillpoint {
@@ -23,13 +25,15 @@ namespace fs = std::filesystem;
 namespace {
 
 // Runs `f`, turning the implementation's errors into stillpoint::Error (sp::Error's type is hidden in
-// the library; the message is kept).
+// the library; the message, and an input error's file and line, are kept).
 template <typename F>
 auto guarded(F&& f) -> decltype(f()) {
   try {
     return f();
   } catch (const Error&) {
     throw;
+  } catch (const sp::InputError& e) {
+    throw Error(e.what(), e.file(), e.line());
   } catch (const sp::Error& e) {
     throw Error(e.what());
   }
@@ -131,26 +135,32 @@ Camera Camera::load(const fs::path& file) {
   return guarded([&] { return from_internal(sp::io::load_camera_config(file)); });
 }
 
-struct System::Impl {
-  sp::io::CameraConfig camera;
-  std::unique_ptr<sp::pipeline::SlamSystem> system;
-  std::function<void(const KeyframeEvent&)> on_keyframe;
-  std::function<void(const LoopClosureEvent&)> on_loop;
-  std::size_t loops_reported = 0;
-  std::size_t frames = 0;
-  std::size_t index = 0;
-  bool shut_down = false;
-  std::optional<double> last_stamp;
+TrackResult System::Impl::track(const sp::io::FrameData& frame) {
+  sp::pipeline::FrameReport report = guarded([&] { return system->process(frame); });
+  ++frames;
+  TrackResult out;
+  out.state = report.state == sp::track::TrackingState::Ok     ? TrackingState::Ok
+              : report.state == sp::track::TrackingState::Lost ? TrackingState::Lost
+                                                               : TrackingState::NotInitialized;
+  out.has_pose = report.T_wc.has_value();
+  if (report.T_wc) out.T_world_camera = to_isometry(*report.T_wc);
+  out.features = report.features;
+  out.culled_features = report.culled;
+  out.keyframe = report.keyframe;
+  out.culled_points = std::move(report.culled_points);
+  if (report.keyframe && on_keyframe) on_keyframe({report.keyframe_id, frame.stamp, out.T_world_camera});
+  report_loops();
+  return out;
+}
 
-  void report_loops() {
-    const auto closures = system->loop_closures();
-    for (; loops_reported < closures.size(); ++loops_reported) {
-      if (!on_loop) continue;
-      const auto& c = closures[loops_reported];
-      on_loop({c.query_stamp, c.match_stamp, to_isometry(c.T_query_match), c.inliers});
-    }
+void System::Impl::report_loops() {
+  const auto closures = system->loop_closures();
+  for (; loops_reported < closures.size(); ++loops_reported) {
+    if (!on_loop) continue;
+    const auto& c = closures[loops_reported];
+    on_loop({c.query_stamp, c.match_stamp, to_isometry(c.T_query_match), c.inliers});
   }
-};
+}
 
 System::System(const Config& config) : impl_(std::make_unique<Impl>()) {
   guarded([&] {
@@ -184,6 +194,8 @@ System::System(const fs::path& config_file, const fs::path& camera_file)
         c.camera_file = camera_file;
         return c;
       }()) {}
+
+System::System(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 
 System::~System() {
   if (!impl_) return;
@@ -239,21 +251,8 @@ TrackResult System::track(const cv::Mat& color, const cv::Mat& depth, double tim
   frame.depth.setTo(0.0f, (frame.depth < cam.depth_min) | (frame.depth > cam.depth_max));
   impl_->last_stamp = timestamp;
 
-  const sp::pipeline::FrameReport report = guarded([&] { return impl_->system->process(frame); });
-  ++impl_->frames;
+  TrackResult out = impl_->track(frame);
   if (impl_->system->failed()) throw Error("a StillPoint pipeline stage failed (see the log)");
-  TrackResult out;
-  out.state = report.state == sp::track::TrackingState::Ok     ? TrackingState::Ok
-              : report.state == sp::track::TrackingState::Lost ? TrackingState::Lost
-                                                               : TrackingState::NotInitialized;
-  out.has_pose = report.T_wc.has_value();
-  if (report.T_wc) out.T_world_camera = to_isometry(*report.T_wc);
-  out.features = report.features;
-  out.culled_features = report.culled;
-  out.keyframe = report.keyframe;
-  if (report.keyframe && impl_->on_keyframe)
-    impl_->on_keyframe({report.keyframe_id, timestamp, out.T_world_camera});
-  impl_->report_loops();
   return out;
 }
 
@@ -275,6 +274,30 @@ std::vector<StampedPose> System::keyframe_trajectory() {
   std::vector<StampedPose> out;
   for (const auto& p : impl_->system->keyframe_trajectory()) out.push_back({p.stamp, to_isometry(p)});
   return out;
+}
+
+void System::save_trajectory(const fs::path& file, TrajectoryFormat format) {
+  guarded([&] {
+    const auto poses = impl_->system->trajectory();
+    if (format == TrajectoryFormat::Tum) {
+      sp::io::write_tum_trajectory(file, poses);
+    } else {
+      sp::io::write_kitti_trajectory(file, poses);
+      sp::io::write_stamps(file.parent_path() / (file.stem().string() + "_times.txt"), poses);
+    }
+    return 0;
+  });
+}
+
+void System::save_keyframe_trajectory(const fs::path& file) {
+  guarded([&] {
+    sp::io::write_tum_trajectory(file, impl_->system->keyframe_trajectory());
+    return 0;
+  });
+}
+
+std::vector<Eigen::Vector3f> System::map_points(std::size_t max_points) {
+  return impl_->system->map_point_positions(max_points);
 }
 
 void System::load_map(const fs::path& file) {

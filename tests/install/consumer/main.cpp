@@ -61,6 +61,9 @@ int main(int argc, char** argv) {
       check(r.T_world_camera.translation().norm() < 5.0, "tracked pose within 5 m of the start (demo: ~1 m)");
     }
     culled += r.culled_features;
+    check(r.culled_points.size() == r.culled_features, "a culled point per culled feature");
+    for (const cv::Point2f& p : r.culled_points)
+      check(p.x >= 0 && p.y >= 0 && p.x < color.cols && p.y < color.rows, "culled points inside the image");
     keyframes += r.keyframe ? 1 : 0;
   }
   slam.shutdown();
@@ -77,6 +80,29 @@ int main(int argc, char** argv) {
   check(culled > 0, "some features culled as dynamic");
   for (std::size_t i = 1; i < trajectory.size(); ++i)
     check(trajectory[i].timestamp > trajectory[i - 1].timestamp, "trajectory timestamps increase");
+  // The map's points, subsampled on request; the trajectory files, one line per pose.
+  const auto points = slam.map_points();
+  check(points.size() > 100, "the map has points");
+  check(slam.map_points(50).size() == 50, "map_points(50) gives 50 points");
+  const std::filesystem::path out = "consumer_out";  // in the working directory
+  std::filesystem::create_directories(out);
+  slam.save_trajectory(out / "tum.txt");
+  slam.save_trajectory(out / "kitti.txt", stillpoint::TrajectoryFormat::Kitti);
+  const auto count_lines = [](const std::filesystem::path& file, std::size_t words) {
+    std::ifstream in(file);
+    std::size_t n = 0;
+    for (std::string l; std::getline(in, l);) {
+      if (l.empty() || l[0] == '#') continue;
+      std::istringstream w(l);
+      std::size_t k = 0;
+      for (std::string x; w >> x;) ++k;
+      n += k == words ? 1 : 0;
+    }
+    return n;
+  };
+  check(count_lines(out / "tum.txt", 8) == trajectory.size(), "TUM file: 8 numbers per pose");
+  check(count_lines(out / "kitti.txt", 12) == trajectory.size(), "KITTI file: 12 numbers per pose");
+  check(count_lines(out / "kitti_times.txt", 1) == trajectory.size(), "KITTI times file: a stamp per pose");
   bool refused = false;
   try {
     (void)slam.track(cv::Mat(), cv::Mat(), 1e12);

@@ -1,7 +1,8 @@
 #pragma once
-// Runs the SLAM system over a frame source and writes what a user expects in OUT: the trajectory of
-// every frame (TUM format), the keyframe trajectory, stats.json, and, with ground truth, ATE/RPE and
-// a plot. Outputs are written also when the run stops early (error, Ctrl-C).
+// `stillpoint run`'s job: drives a stillpoint::System (the public API, with system_access.hpp for
+// what only the CLI needs) over a frame source and writes what a user expects in OUT: the trajectory
+// of every frame (TUM and KITTI), the keyframe trajectory, stats.json, and, with ground truth, ATE/RPE
+// and a plot. Outputs are written also when the run stops early (error, Ctrl-C).
 #include <atomic>
 #include <filesystem>
 #include <functional>
@@ -10,11 +11,9 @@
 
 #include "stillpoint/io/frame_source.hpp"
 #include "stillpoint/pipeline/system_config.hpp"
+#include "stillpoint/stillpoint.hpp"
 
-namespace sp::pipeline {
-
-class SlamSystem;
-struct FrameReport;
+namespace sp::api {
 
 struct RunOptions {
   std::filesystem::path out_dir;
@@ -37,9 +36,9 @@ struct RunOptions {
   std::size_t rss_every_frames = 100;
   // Called on the tracking thread after each frame (the live view, `run --viewer`); an exception
   // from it is logged and the observer dropped, the run goes on.
-  std::function<void(const io::FrameData&, const FrameReport&, SlamSystem&)> on_frame;
+  std::function<void(const io::FrameData&, const stillpoint::TrackResult&, stillpoint::System&)> on_frame;
   // Called once after the stages have drained, before the outputs are written.
-  std::function<void(SlamSystem&)> on_finish;
+  std::function<void(stillpoint::System&)> on_finish;
 };
 
 struct RunResult {
@@ -48,6 +47,6 @@ struct RunResult {
   std::optional<double> ate_rmse;
 };
 
-RunResult run_slam(io::FrameSource& source, const SystemConfig& config, const RunOptions& options);
+RunResult run_slam(io::FrameSource& source, const pipeline::SystemConfig& config, const RunOptions& options);
 
-}  // namespace sp::pipeline
+}  // namespace sp::api

@@ -1,10 +1,11 @@
-#include "stillpoint/pipeline/runner.hpp"
+#include "stillpoint/api/runner.hpp"
 
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
 #include <fstream>
 
+#include "stillpoint/api/system_access.hpp"
 #include "stillpoint/common/error.hpp"
 #include "stillpoint/common/progress_bar.hpp"
 #include "stillpoint/common/timing.hpp"
@@ -12,7 +13,9 @@
 #include "stillpoint/eval/loop_check.hpp"
 #include "stillpoint/pipeline/slam_system.hpp"
 
-namespace sp::pipeline {
+namespace sp::api {
+
+using stillpoint::internal::SystemAccess;
 
 namespace {
 
@@ -53,20 +56,23 @@ void check_loops_against(const std::vector<io::StampedPose>& gt,
   stats["loops_false"] = n_false;
 }
 
-void write_outputs(SlamSystem& system, const RunOptions& options, const nlohmann::json& run_stats,
+void write_outputs(stillpoint::System& system, const RunOptions& options, const nlohmann::json& run_stats,
                    RunResult& result) {
   std::filesystem::create_directories(options.out_dir);
-  const auto trajectory = system.trajectory();
-  io::write_tum_trajectory(options.out_dir / "trajectory.txt", trajectory);
-  io::write_kitti_trajectory(options.out_dir / "trajectory_kitti.txt", trajectory);
-  io::write_stamps(options.out_dir / "trajectory_kitti_times.txt", trajectory);
-  io::write_tum_trajectory(options.out_dir / "keyframes.txt", system.keyframe_trajectory());
-  result.stats = system.statistics();
+  system.save_trajectory(options.out_dir / "trajectory.txt", stillpoint::TrajectoryFormat::Tum);
+  // trajectory_kitti.txt and its timestamps, trajectory_kitti_times.txt
+  system.save_trajectory(options.out_dir / "trajectory_kitti.txt", stillpoint::TrajectoryFormat::Kitti);
+  system.save_keyframe_trajectory(options.out_dir / "keyframes.txt");
+  // The evaluation reads the pipeline's own poses (quaternions as estimated, not re-derived from the
+  // API's rotation matrices), so its figures stay those of the files above.
+  pipeline::SlamSystem& slam = SystemAccess::pipeline(system);
+  const auto trajectory = slam.trajectory();
+  result.stats = slam.statistics();
   result.stats["completed"] = result.completed;
   for (const auto& [k, v] : options.extra_stats.items()) result.stats[k] = v;
   for (const auto& [k, v] : run_stats.items()) result.stats[k] = v;
   try {
-    const nlohmann::json artifacts = system.write_artifacts();
+    const nlohmann::json artifacts = slam.write_artifacts();
     if (!artifacts.empty()) result.stats["artifacts"] = artifacts;
   } catch (const std::exception& e) {
     spdlog::warn("run artifacts (PLY, thumbnails) not written: {}", e.what());
@@ -78,7 +84,7 @@ void write_outputs(SlamSystem& system, const RunOptions& options, const nlohmann
       result.stats["eval"] = eval::to_json(ev);
       result.ate_rmse = ev.ate.rmse;
       eval::write_plot(options.out_dir / "trajectory.png", ev);
-      check_loops_against(gt, system.loop_closures(), result.stats);
+      check_loops_against(gt, slam.loop_closures(), result.stats);
     } catch (const Error& e) {
       spdlog::warn("evaluation skipped: {}", e.what());
     }
@@ -88,9 +94,9 @@ void write_outputs(SlamSystem& system, const RunOptions& options, const nlohmann
 
 }  // namespace
 
-RunResult run_slam(io::FrameSource& source, const SystemConfig& config, const RunOptions& options) {
+RunResult run_slam(io::FrameSource& source, const pipeline::SystemConfig& config, const RunOptions& options) {
   RunResult result;
-  SystemOptions system_options;
+  pipeline::SystemOptions system_options;
   system_options.deterministic = options.deterministic;
   system_options.boxes_file = options.boxes_file;
   system_options.masks_dir = options.masks_dir;
@@ -100,7 +106,8 @@ RunResult run_slam(io::FrameSource& source, const SystemConfig& config, const Ru
     system_options.artifacts.expected_frames = source.size_hint();
     system_options.artifacts.dense_cloud = options.dense_cloud;
   }
-  SlamSystem system(config, source.camera(), system_options);
+  stillpoint::System system = SystemAccess::create(config, source.camera(), system_options);
+  pipeline::SlamSystem& slam = SystemAccess::pipeline(system);
   if (options.load_map) system.load_map(*options.load_map);
   ProgressBar bar(options.label.empty() ? "tracking" : options.label, source.size_hint(), options.progress);
   Stopwatch wall;
@@ -118,23 +125,23 @@ RunResult run_slam(io::FrameSource& source, const SystemConfig& config, const Ru
       }
       Stopwatch load;
       auto data = source.next();
-      system.times().add("load", load.elapsed_ms());
+      slam.times().add("load", load.elapsed_ms());
       if (!data) break;
-      const FrameReport report = system.process(*data);
+      const stillpoint::TrackResult tracked = SystemAccess::track(system, *data);
       if (on_frame) {
         try {
-          on_frame(*data, report, system);
+          on_frame(*data, tracked, system);
         } catch (const std::exception& e) {
           spdlog::warn("frame observer failed, dropped: {}", e.what());
           on_frame = nullptr;
         }
       }
-      if (report.state == track::TrackingState::Lost) ++lost;
+      if (tracked.state == stillpoint::TrackingState::Lost) ++lost;
       ++done;
       if (options.rss_every_frames != 0 && done % options.rss_every_frames == 0) {
         rss_timeline.push_back({done, current_rss_mib()});
       }
-      if (system.failed()) throw Error("a pipeline stage failed (see the log)");
+      if (slam.failed()) throw Error("a pipeline stage failed (see the log)");
       const double fps = static_cast<double>(done) / std::max(1e-9, wall.elapsed_ms() / 1000.0);
       bar.update(done, fmt::format("{:.1f} fps, {} lost", fps, lost));
     }
@@ -144,7 +151,7 @@ RunResult run_slam(io::FrameSource& source, const SystemConfig& config, const Ru
     result.completed = false;
   }
   bar.finish();
-  system.finish();
+  system.shutdown();
   if (options.on_finish) {
     try {
       options.on_finish(system);
@@ -171,4 +178,4 @@ RunResult run_slam(io::FrameSource& source, const SystemConfig& config, const Ru
   return result;
 }
 
-}  // namespace sp::pipeline
+}  // namespace sp::api
