@@ -176,6 +176,13 @@ class Faults : public ::testing::Test {
     ASSERT_GE(all_.size(), 150u);
   }
   [[nodiscard]] std::vector<Frame> first(std::size_t n) const { return {all_.begin(), all_.begin() + n}; }
+  // Source frame indices 0..played-1, then 0..replay-1 (the camera jumps back to the start).
+  [[nodiscard]] static std::vector<std::size_t> start_then_start(std::size_t played, std::size_t replay) {
+    std::vector<std::size_t> order;
+    for (std::size_t i = 0; i < played; ++i) order.push_back(i);
+    for (std::size_t i = 0; i < replay; ++i) order.push_back(i);
+    return order;
+  }
   // Source frames `order` played as one sequence at 30 Hz from the first frame's stamp, copied under
   // new names (a frame may appear twice), each with its source frame's ground truth.
   [[nodiscard]] std::vector<Frame> replayed(const std::vector<std::size_t>& order) const {
@@ -402,10 +409,7 @@ TEST_F(Faults, PersonFillingTheViewForOneSecondIsSurvived) {
 // keyframe's points still match and the pose optimisation converges from 32 cm away) or by
 // relocalisation; either way the poses after the jump must be right (ATE) and none may be missing.
 TEST_F(Faults, KidnappedCameraIsFoundAgain) {
-  std::vector<std::size_t> order;
-  for (std::size_t i = 0; i < 100; ++i) order.push_back(i);
-  for (std::size_t i = 0; i < 60; ++i) order.push_back(i);
-  const Sequence seq("kidnapped", replayed(order));
+  const Sequence seq("kidnapped", replayed(start_then_start(100, 60)));
   const Outcome o = run(seq);
   EXPECT_TRUE(o.result.completed);
   EXPECT_EQ(o.frames(), 160);
@@ -427,10 +431,7 @@ TEST_F(Faults, KidnappedCameraIsFoundAgain) {
 TEST_F(Faults, ReplayedStartIsTrackedInTheOneMapWithoutDuplicateKeyframes) {
   const Sequence base_seq("replay_base", first(150));
   const Outcome base = run(base_seq);
-  std::vector<std::size_t> order;
-  for (std::size_t i = 0; i < 150; ++i) order.push_back(i);
-  for (std::size_t i = 0; i < 60; ++i) order.push_back(i);
-  const Sequence seq("replayed_start", replayed(order));
+  const Sequence seq("replayed_start", replayed(start_then_start(150, 60)));
   const Outcome o = run(seq);
   EXPECT_TRUE(o.result.completed);
   EXPECT_EQ(o.frames(), 210);
