@@ -196,16 +196,26 @@ bool OrbExtractor::level_usable(std::size_t l, int quota) const {
   return level_size_[l].width >= kPatchSize && level_size_[l].height >= kPatchSize && quota > 0;
 }
 
-void OrbExtractor::process_level(int level, const cv::Mat& mask) {
+namespace {
+// Whether a level-`scale` position falls where the level-0 mask is 0 (an empty mask blocks nothing).
+bool masked_out(const cv::Mat& mask, const cv::Point2f& p, float scale) {
+  if (mask.empty()) return false;
+  const int x = std::min(mask.cols - 1, static_cast<int>(std::lround(p.x * scale)));
+  const int y = std::min(mask.rows - 1, static_cast<int>(std::lround(p.y * scale)));
+  return mask.at<std::uint8_t>(y, x) == 0;
+}
+}  // namespace
+
+void OrbExtractor::process_level(int level, const cv::Mat& mask, int quota) {
   const auto l = static_cast<std::size_t>(level);
-  if (!level_usable(l, per_level_[l])) {
+  if (!level_usable(l, quota)) {
     level_kps_[l].clear();
     level_desc_[l].release();
     scratch_[l].found.clear();
     return;
   }
   detect_level(level, mask);
-  describe_level(level, scratch_[l].found, per_level_[l], true);
+  describe_level(level, scratch_[l].found, quota, true);
 }
 
 void OrbExtractor::detect_level(int level, const cv::Mat& mask) {
@@ -213,19 +223,13 @@ void OrbExtractor::detect_level(int level, const cv::Mat& mask) {
   const int w = level_size_[l].width, h = level_size_[l].height;
   const cv::Mat img = level_image(level);
   const float scale = static_cast<float>(scale_[l]);
-  const auto masked_out = [&](const cv::Point2f& p) {
-    if (mask.empty()) return false;
-    const int x = std::min(mask.cols - 1, static_cast<int>(std::lround(p.x * scale)));
-    const int y = std::min(mask.rows - 1, static_cast<int>(std::lround(p.y * scale)));
-    return mask.at<std::uint8_t>(y, x) == 0;
-  };
 
   // FAST with the high threshold over the level; cells left empty are retried with the low one.
   LevelScratch& sc = scratch_[l];
   std::vector<cv::KeyPoint>& found = sc.found;
   cv::FAST(img, found, config_.fast_threshold, true);
   if (!mask.empty()) {
-    std::erase_if(found, [&](const cv::KeyPoint& k) { return masked_out(k.pt); });
+    std::erase_if(found, [&](const cv::KeyPoint& k) { return masked_out(mask, k.pt, scale); });
   }
   const int n_cols = std::max(1, w / kCellSize), n_rows = std::max(1, h / kCellSize);
   const int cell_w = (w + n_cols - 1) / n_cols, cell_h = (h + n_rows - 1) / n_rows;
@@ -255,7 +259,8 @@ void OrbExtractor::detect_level(int level, const cv::Mat& mask) {
         for (cv::KeyPoint k : sc.cell_found) {
           k.pt.x += static_cast<float>(wx0);
           k.pt.y += static_cast<float>(wy0);
-          if (k.pt.x < x0 || k.pt.x >= x1 || k.pt.y < y0 || k.pt.y >= y1 || masked_out(k.pt)) continue;
+          if (k.pt.x < x0 || k.pt.x >= x1 || k.pt.y < y0 || k.pt.y >= y1 || masked_out(mask, k.pt, scale))
+            continue;
           found.push_back(k);
         }
       }
@@ -327,27 +332,23 @@ void OrbExtractor::extract_again(const cv::Mat& mask, std::vector<cv::KeyPoint>&
   for_each_level([&](int level) {
     const auto l = static_cast<std::size_t>(level);
     const int quota = static_cast<int>(std::lround(per_level_[l] * share));
+    if (!options.reuse_detections) {
+      process_level(level, mask, quota);
+      return;
+    }
     if (!level_usable(l, quota)) {
       level_kps_[l].clear();
       level_desc_[l].release();
       return;
     }
+    // The corners FAST found on this pyramid and the blurred level are still valid: only the
+    // selection among those outside the mask and the descriptors are new.
     LevelScratch& sc = scratch_[l];
-    if (!options.reuse_detections) {
-      detect_level(level, mask);
-      describe_level(level, sc.found, quota, true);
-      return;
-    }
-    // The corners FAST found on this pyramid are still valid: keep those outside the mask, and the
-    // blurred level too; only the selection and the descriptors are new.
     const float scale = static_cast<float>(scale_[l]);
-    sc.cell_found.clear();
-    for (const cv::KeyPoint& k : sc.found) {
-      const int x = std::min(mask.cols - 1, static_cast<int>(std::lround(k.pt.x * scale)));
-      const int y = std::min(mask.rows - 1, static_cast<int>(std::lround(k.pt.y * scale)));
-      if (mask.at<std::uint8_t>(y, x) != 0) sc.cell_found.push_back(k);
-    }
-    describe_level(level, sc.cell_found, quota, blurred_[l].empty());
+    sc.unmasked.clear();
+    for (const cv::KeyPoint& k : sc.found)
+      if (!masked_out(mask, k.pt, scale)) sc.unmasked.push_back(k);
+    describe_level(level, sc.unmasked, quota, false);
   });
   collect(keypoints, descriptors);
 }
@@ -366,7 +367,7 @@ void OrbExtractor::for_each_level(F&& work) {
 
 void OrbExtractor::detect_and_describe(const cv::Mat& mask, std::vector<cv::KeyPoint>& keypoints,
                                        cv::Mat& descriptors) {
-  for_each_level([&](int level) { process_level(level, mask); });
+  for_each_level([&](int level) { process_level(level, mask, per_level_[static_cast<std::size_t>(level)]); });
   collect(keypoints, descriptors);
 }
 

@@ -77,7 +77,8 @@ class OrbExtractor {
  private:
   void build_pyramid(const cv::Mat& gray);
   [[nodiscard]] bool level_usable(std::size_t level, int quota) const;
-  void process_level(int level, const cv::Mat& mask);
+  // Detection and description of one level with `quota` keypoints.
+  void process_level(int level, const cv::Mat& mask, int quota);
   // FAST corners of one level (outside the mask) into its scratch `found`.
   void detect_level(int level, const cv::Mat& mask);
   // Selects `quota` of the candidates, orients and describes them (blur: the level's blurred copy
@@ -103,6 +104,7 @@ class OrbExtractor {
   std::vector<cv::Mat> level_desc_;
   struct LevelScratch {
     std::vector<cv::KeyPoint> found, cell_found;
+    std::vector<cv::KeyPoint> unmasked;  // extract_again's candidates among `found`
     std::vector<int> cell_count;
     QuadtreeScratch quadtree;
   };

@@ -15,10 +15,10 @@ DynamicConfig DynamicConfig::from_yaml(const ConfigReader& r) {
   r.read("detector_interval", c.detector_interval, 1, 100);
   r.read("detector_nice", c.detector_nice, 0, 19);
   r.read("refill_share", c.refill_share, 0.0, 1.0);
-  r.read("max_detection_age", c.max_detection_age, 0, 1000);
-  r.read("stale_wait_ms", c.stale_wait_ms, 0.0, 10000.0);
   r.read("refill_budget", c.refill_budget, 0.0, 10.0);
   r.read("refill_reuse", c.refill_reuse);
+  r.read("max_detection_age", c.max_detection_age, 0, 1000);
+  r.read("stale_wait_ms", c.stale_wait_ms, 0.0, 10000.0);
   if (r.has("detector")) {
     c.detector = dyn::DetectorConfig::from_yaml(r.section("detector"));
     c.detector_configured = true;

@@ -30,16 +30,16 @@ struct DynamicConfig {
   // the moving objects so the static part gets the keypoint budget (a person filling the view of a
   // bare room left too few features to start the map). 0: never.
   double refill_share = 0.3;
-  // A detection older than this many frames is too stale to carry (a person entering the view is in
-  // no box yet): tracking then waits up to stale_wait_ms for a newer one. Only a detector falling
-  // behind (a loaded CPU) makes detections this old. 0: never wait.
-  int max_detection_age = 4;
-  double stale_wait_ms = 200.0;
   // Refill at most this many times the removed feature count (the frame regains about its ORB budget
   // and tracking does not pay for surplus features); 0: a whole n_features budget.
   double refill_budget = 1.0;
   // Refill selects among the corners the first detection found (no second FAST pass and blur).
   bool refill_reuse = true;
+  // A detection older than this many frames is too stale to carry (a person entering the view is in
+  // no box yet): tracking then waits up to stale_wait_ms for a newer one. Only a detector falling
+  // behind (a loaded CPU) makes detections this old. 0: never wait.
+  int max_detection_age = 4;
+  double stale_wait_ms = 200.0;
   dyn::DetectorConfig detector;  // used as given when the file sets `detector`, else from the model
   bool detector_configured = false;
   dyn::MotionCheckConfig motion;
