@@ -5,6 +5,7 @@
 #include <fstream>
 #include <map>
 #include <opencv2/imgcodecs.hpp>
+#include <optional>
 
 #include "../support/shared_data.hpp"
 #include "stillpoint/common/error.hpp"
@@ -40,13 +41,21 @@ const Expect kImages[] = {{"yolov5_bus.jpg", 2, 6},
                           {"neg_opencv_hfs_000_bird.jpg", 0, 0},
                           {"neg_opencv_hfs_001_lake.jpg", 0, 0}};
 
-void check_model(const std::filesystem::path& model) {
+// fit_long_side > 0: the input fitted to each image at that long side (as the system does for the
+// camera), which needs a detector per image.
+void check_model(const std::filesystem::path& model, int fit_long_side = 0) {
   SP_REQUIRE_SHARED(model, kPeople);
-  YoloDetector det(DetectorConfig::for_model(model));
+  std::optional<YoloDetector> det;
+  if (fit_long_side == 0) det.emplace(DetectorConfig::for_model(model));
   for (const auto& e : kImages) {
     const cv::Mat img = cv::imread((kPeople / e.file).string(), cv::IMREAD_COLOR);
     ASSERT_FALSE(img.empty()) << e.file;
-    const Detections d = det.detect(img);
+    if (fit_long_side > 0) {
+      DetectorConfig c = DetectorConfig::for_model(model);
+      c.fit_input_to_image(fit_long_side, img.cols, img.rows);
+      det.emplace(c);
+    }
+    const Detections d = det->detect(img);
     int persons = 0;
     for (const auto& it : d.items) {
       EXPECT_EQ(it.class_id, 0);  // only the dynamic class (person) is reported
@@ -61,6 +70,8 @@ void check_model(const std::filesystem::path& model) {
 }
 
 TEST(YoloDetector, YoloxNanoFindsPeople) { check_model(kModels / "yolox_nano.onnx"); }
+// The system's default input (dynamic.detector_input 320): the same people at half the resolution.
+TEST(YoloDetector, YoloxNanoFindsPeopleAtTheFittedInput) { check_model(kModels / "yolox_nano.onnx", 320); }
 TEST(YoloDetector, YoloFastestFindsPeople) { check_model(kModels / "yolo-fastest-1.1.cfg"); }
 TEST(YoloDetector, YoloFastestBodyFindsPeople) { check_model(kModels / "yolo-fastest-1.1_body.cfg"); }
 
@@ -77,6 +88,33 @@ TEST(YoloDetector, PersonBoxInDarknetPhotoIsWhereThePersonIs) {
   EXPECT_NEAR(b.x + b.width / 2, 232, 40);
   EXPECT_GT(b.height, 200);
   EXPECT_EQ(det.decoder(), "yolox");
+}
+
+TEST(DetectorConfig, FittedInputKeepsTheAspectInMultiplesOfTheStride) {
+  DetectorConfig c;
+  c.fit_input_to_image(320, 640, 480);  // VGA: 320x240, height rounded up to the stride
+  EXPECT_EQ(c.input_width, 320);
+  EXPECT_EQ(c.input_height, 256);
+  c.fit_input_to_image(320, 480, 640);  // portrait: the long side is the height
+  EXPECT_EQ(c.input_width, 256);
+  EXPECT_EQ(c.input_height, 320);
+  c.fit_input_to_image(416, 1280, 720);  // 416x234 -> 416x256
+  EXPECT_EQ(c.input_width, 416);
+  EXPECT_EQ(c.input_height, 256);
+  for (int side : {32, 100, 333, 640})
+    for (auto [w, h] : {std::pair{640, 480}, std::pair{1920, 1080}, std::pair{100, 1000}}) {
+      c.fit_input_to_image(side, w, h);
+      EXPECT_EQ(c.input_width % 32, 0);
+      EXPECT_EQ(c.input_height % 32, 0);
+      // Each side holds the image scaled to the long side (nothing is cut) with less than a stride spare.
+      const double scale = static_cast<double>(side) / std::max(w, h);
+      EXPECT_GE(c.input_width, w * scale - 1e-9);
+      EXPECT_GE(c.input_height, h * scale - 1e-9);
+      EXPECT_LT(c.input_width, std::max(32.0, w * scale + 32));
+      EXPECT_LT(c.input_height, std::max(32.0, h * scale + 32));
+    }
+  EXPECT_THROW(c.fit_input_to_image(16, 640, 480), Error);
+  EXPECT_THROW(c.fit_input_to_image(320, 0, 480), Error);
 }
 
 TEST(YoloDetector, MissingModelNamesTheFile) {

@@ -1,7 +1,9 @@
 #include "stillpoint/dynamic/detection.hpp"
 
 #include <algorithm>
+#include <cmath>
 #include <fstream>
+#include <string>
 #include <system_error>
 
 #include "stillpoint/common/error.hpp"
@@ -90,6 +92,16 @@ bool file_exists(const std::filesystem::path& p) {
 }
 
 }  // namespace
+
+void DetectorConfig::fit_input_to_image(int long_side, int image_width, int image_height) {
+  if (long_side < 32 || image_width <= 0 || image_height <= 0)
+    throw Error("detector input: long side " + std::to_string(long_side) + " px for a " +
+                std::to_string(image_width) + "x" + std::to_string(image_height) + " image is not usable");
+  const auto up32 = [](double v) { return std::max(32, static_cast<int>(std::ceil(v / 32.0)) * 32); };
+  const double scale = static_cast<double>(long_side) / std::max(image_width, image_height);
+  input_width = up32(image_width * scale);
+  input_height = up32(image_height * scale);
+}
 
 DetectorConfig DetectorConfig::for_model(const std::filesystem::path& model) {
   if (!file_exists(model)) throw Error(model.string() + ": detector model file not found");

@@ -58,6 +58,12 @@ struct DetectorConfig {
   // Throws sp::Error naming the file when it does not exist or the extension is unknown.
   static DetectorConfig for_model(const std::filesystem::path& model);
 
+  // Sets the network input for images of image_width x image_height: the long side `long_side` px,
+  // the short side following the image's aspect, each rounded up to a multiple of 32 (the largest
+  // stride), e.g. 640x480 at 320 -> 320x256. Only for models whose grid is decoded outside the graph
+  // (YOLOX): exports that bake the grid into the graph (YOLOv7 with grid) need their own size.
+  void fit_input_to_image(int long_side, int image_width, int image_height);
+
   // The class table in use (class_names or COCO).
   [[nodiscard]] const std::vector<std::string>& names() const {
     return class_names.empty() ? coco_class_names() : class_names;

@@ -13,6 +13,9 @@ DynamicConfig DynamicConfig::from_yaml(const ConfigReader& r) {
   r.read("detector_budget_ms", c.detector_budget_ms, 0.0, 1000.0);
   r.read("detector_threads", c.detector_threads, 0, 64);
   r.read("detector_interval", c.detector_interval, 1, 100);
+  r.read("detector_input", c.detector_input, 0, 4096);
+  if (c.detector_input != 0 && c.detector_input < 32)
+    r.fail("detector_input", "must be 0 (the model's own input) or at least 32 px");
   r.read("detector_nice", c.detector_nice, 0, 19);
   r.read("refill_share", c.refill_share, 0.0, 1.0);
   r.read("refill_budget", c.refill_budget, 0.0, 10.0);
@@ -68,7 +71,11 @@ DynamicCulling::DynamicCulling(const DynamicConfig& config, const geo::CameraInt
     dyn::DetectorConfig dc =
         config.detector_configured ? config.detector : dyn::DetectorConfig::for_model(model_file_.string());
     dc.model = model_file_.string();
-    if (!config.detector_configured) dc.threads = config.detector_threads;
+    if (!config.detector_configured) {
+      dc.threads = config.detector_threads;
+      if (config.detector_input > 0 && dc.decoder == "yolox")
+        dc.fit_input_to_image(config.detector_input, camera.width, camera.height);
+    }
     detector_ = std::make_unique<dyn::AsyncDetector>(
         dc, deterministic ? dyn::AsyncDetector::Mode::kSync : dyn::AsyncDetector::Mode::kAsync,
         config.detector_nice);

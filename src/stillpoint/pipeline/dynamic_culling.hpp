@@ -23,6 +23,10 @@ struct DynamicConfig {
   double detector_budget_ms = 0.0;  // ms tracking may wait for the current frame's detection
   int detector_threads = 1;         // OpenCV threads for inference (the other core tracks and maps)
   int detector_interval = 3;        // detect every N-th frame; boxes are carried by flow in between
+  // Long side of the YOLOX input, px (short side from the camera's aspect; 0 = the model's 416x416).
+  // 320 halves the detector's cost with the same culling recall on the tune rooms (docs/dynamic.md):
+  // people indoors are large, so the lost resolution costs nothing and the detector keeps up.
+  int detector_input = 320;
   // Scheduling niceness of the detector thread (0 = as tracking). 2 keeps tracking within +5 ms of
   // culling-off on 2 cores; 5 and more starve the detector and stale boxes cost accuracy (docs/dynamic.md).
   int detector_nice = 2;

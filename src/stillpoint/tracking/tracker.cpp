@@ -93,6 +93,7 @@ TrackOutcome Tracker::track(Frame& frame, const MappingStatus& mapping) {
     const geo::SE3 expected = predicted ? *predicted : last_frame_.T_cw;
     const bool motion_expected = velocity_.has_value();
     bool relocalized = false;
+    why_lost_.clear();
     if (state_ == TrackingState::Ok) {
       if (velocity_) ok = by_motion = track_motion_model(view, frame);
       if (!ok) ok = track_reference_keyframe(view, frame);
@@ -133,6 +134,8 @@ TrackOutcome Tracker::track(Frame& frame, const MappingStatus& mapping) {
         }
       }
     } else {
+      // Once per loss, not on every failed relocalisation after it.
+      if (state_ == TrackingState::Ok) spdlog::info("frame {} lost:{}", frame.index, why_lost_);
       state_ = TrackingState::Lost;
       velocity_.reset();
       ++lost_frames_;
@@ -219,9 +222,14 @@ bool Tracker::track_motion_model(map::MapView& view, Frame& frame) {
     frame.reset_matches();
     matches = match_last_frame(view, frame, last_frame_, 2.0 * config_.motion_search_radius, ctx);
   }
-  if (matches < config_.min_motion_matches) return false;
+  if (matches < config_.min_motion_matches) {
+    why_lost_ += fmt::format(" motion model {} matches;", matches);
+    return false;
+  }
   frame.has_pose = true;
-  return optimize_pose(view, frame) >= 10;
+  const int inliers = optimize_pose(view, frame);
+  if (inliers < 10) why_lost_ += fmt::format(" motion model {} inliers of {} matches;", inliers, matches);
+  return inliers >= 10;
 }
 
 bool Tracker::track_reference_keyframe(map::MapView& view, Frame& frame) {
@@ -229,10 +237,16 @@ bool Tracker::track_reference_keyframe(map::MapView& view, Frame& frame) {
   if (ref == nullptr) return false;
   frame.reset_matches();
   const int matches = match_keyframe(view, frame, *ref, 0.7f);
-  if (matches < 15) return false;
+  if (matches < 15) {
+    why_lost_ += fmt::format(" reference keyframe {} matches;", matches);
+    return false;
+  }
   frame.T_cw = last_frame_.has_pose ? last_frame_.T_cw : ref->T_cw;
   frame.has_pose = true;
-  return optimize_pose(view, frame) >= 10;
+  const int inliers = optimize_pose(view, frame);
+  if (inliers < 10)
+    why_lost_ += fmt::format(" reference keyframe {} inliers of {} matches;", inliers, matches);
+  return inliers >= 10;
 }
 
 int Tracker::optimize_pose(map::MapView& view, Frame& frame) {
@@ -347,6 +361,7 @@ bool Tracker::track_local_map(map::MapView& view, Frame& frame) {
   }
   const int needed =
       recently_relocalized && relocalized_once_ ? config_.min_inliers_after_reloc : config_.min_inliers;
+  if (inliers < needed) why_lost_ += fmt::format(" local map {} inliers (needs {});", inliers, needed);
   return inliers >= needed;
 }
 

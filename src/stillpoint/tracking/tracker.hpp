@@ -5,6 +5,7 @@
 #include <functional>
 #include <memory>
 #include <optional>
+#include <string>
 #include <vector>
 
 #include "stillpoint/map/map.hpp"
@@ -140,6 +141,7 @@ class Tracker {
   std::vector<map::KeyframeId> local_keyframes_;
   std::vector<map::PointId> local_points_;
   std::size_t lost_frames_ = 0;
+  std::string why_lost_;  // the failed step and its counts, for the log when tracking is lost
   std::size_t relocalizations_ = 0;
   bool relocalized_once_ = false;            // a relocalised pose was found (last_reloc_frame_ is meaningful)
   std::size_t reloc_frame_ = 0;              // frame of the relocalised pose being verified (or the last one)
