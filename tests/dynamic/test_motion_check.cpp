@@ -182,6 +182,43 @@ TEST(MotionCheck, MovingBoxCulledStaticBoxKeptBackgroundInBoxKept) {
             static_cast<int>(std::count(r.keypoint_dynamic.begin(), r.keypoint_dynamic.end(), true)));
 }
 
+// A camera-motion fit that fails (here: no depth for PnP, so a wrong predicted motion is kept) makes
+// the whole static scene look like it moves. The motion check must notice that most of the points
+// it fitted on moved and decide nothing by flow, rather than cull the background.
+TEST(MotionCheck, WrongCameraMotionFitIsRejectedNotCulled) {
+  const Scene s;
+  Pair p = make_pair(s, 1.5, {0.04, 0, 0}, {0, 0.05});
+  const cv::Mat label = p.cur.label.clone();
+  p.cur.depth.setTo(0.f);  // no point for PnP: the prediction is all there is
+  const cv::Rect2f patch_box = test::label_box(label, 2);
+  Detections det;
+  det.frame_index = 1;
+  det.items = {{patch_box, 0, 0.9f}};
+  MotionCheckConfig cfg;
+  cfg.static_proof_frames = 0;
+  DynamicInput in = input(p, true, &det);
+
+  in.T_cur_prev_predicted = p.T_cur_prev;  // control: the right motion
+  const DynamicResult right = DynamicFeatureFilter(cfg).process(in);
+  EXPECT_FALSE(right.ego_motion_rejected);
+  EXPECT_LE(keypoint_shares(p, right, {patch_box}).dyn_outside, 0.02);
+
+  in.T_cur_prev_predicted = pose(-4.0, {-0.05, 0, 0}).inverse();  // panned the other way
+  cfg.max_moving_share = 1.0;  // without the rule, the background is culled
+  const DynamicResult unguarded = DynamicFeatureFilter(cfg).process(in);
+  EXPECT_FALSE(unguarded.ego_motion_rejected);
+  EXPECT_GE(keypoint_shares(p, unguarded, {patch_box}).dyn_outside, 0.3);
+
+  cfg.max_moving_share = 0.5;
+  const DynamicResult guarded = DynamicFeatureFilter(cfg).process(in);
+  EXPECT_TRUE(guarded.ego_motion_rejected);
+  const KpShares k = keypoint_shares(p, guarded, {patch_box});
+  EXPECT_LE(k.dyn_outside, 0.02);  // no background culled
+  ASSERT_EQ(guarded.box_dynamic.size(), 1u);
+  EXPECT_TRUE(guarded.box_dynamic[0]);  // the person's class decides, as without flow
+  EXPECT_GE(k.dyn_patch, 0.97);
+}
+
 TEST(MotionCheck, AblationModes) {
   const Scene s;
   const Pair p = make_pair(s, 1.5, {0.04, 0, 0}, {0, 0.05});

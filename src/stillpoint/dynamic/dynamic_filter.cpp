@@ -296,8 +296,18 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
     if (want_reproj) done = reprojection_residuals(in, fit, res, eps);
     if (!done) epipolar_residuals(fit, res, eps);
     for (std::size_t i = 0; i < n; ++i) moving[i] = res.flow_residual[i] > eps[i];
+    int fitted = 0, fitted_moving = 0;
+    for (int i : fit) {
+      if (res.flow_residual[static_cast<std::size_t>(i)] < 0.f) continue;
+      ++fitted;
+      fitted_moving += moving[static_cast<std::size_t>(i)] ? 1 : 0;
+    }
+    res.ego_motion_rejected = do_flow && fitted >= cfg_.min_static_points &&
+                              static_cast<double>(fitted_moving) > cfg_.max_moving_share * fitted;
   }
   res.flow_point_moving = moving;
+  // A rejected camera-motion fit: flow judges nothing this frame (classes decide, as without flow).
+  const bool flow_judges = do_flow && !res.ego_motion_rejected;
 
   // 4. Which boxes move.
   res.box_dynamic.assign(res.boxes.size(), false);
@@ -343,7 +353,7 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
       for (std::size_t i : members) mov += moving[i] ? 1 : 0;
     }
     enum class Seen { kMoving, kStill, kUndecided } seen = Seen::kUndecided;
-    const bool judged = cfg_.mode != CullMode::kDetectorOnly && do_flow;
+    const bool judged = cfg_.mode != CullMode::kDetectorOnly && flow_judges;
     if (judged && total >= cfg_.min_points_to_decide) {
       seen = static_cast<double>(mov) >= cfg_.moving_ratio_threshold * static_cast<double>(total)
                  ? Seen::kMoving
@@ -383,7 +393,7 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
     bool dyn = false;
     if (cfg_.mode == CullMode::kDetectorOnly) {
       dyn = true;
-    } else if (!do_flow) {
+    } else if (!flow_judges) {
       dyn = always;
     } else {
       dyn = seen == Seen::kMoving || held || unproven;
@@ -397,7 +407,7 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
   });
 
   // 5. Confirmed movers: moving points with enough moving neighbours (isolated ones are noise).
-  const bool cull_movers = do_flow && (cfg_.mode == CullMode::kFlowOnly || cfg_.cull_unboxed_movers);
+  const bool cull_movers = flow_judges && (cfg_.mode == CullMode::kFlowOnly || cfg_.cull_unboxed_movers);
   std::vector<bool> confirmed(n, false);
   const PointGrid grid(cur, static_cast<float>(std::max(cfg_.cluster_radius_px, cfg_.unboxed_radius_px)));
   if (cull_movers) {
@@ -439,7 +449,7 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
           if (z > 0.f) dyn = std::abs(z - object_depth[b]) <= bg_margin;
         }
       }
-      if (!dyn && (cull_movers || do_flow)) {
+      if (!dyn && (cull_movers || flow_judges)) {
         const int j = nearest_flow(p);
         const bool mover_near = j >= 0 && moving[static_cast<std::size_t>(j)];
         dyn = cull_movers && j >= 0 && confirmed[static_cast<std::size_t>(j)];

@@ -65,6 +65,11 @@ struct MotionCheckConfig {
   bool keep_background_in_box = true;
   double background_depth_margin_m = 0.4;  // metres [0.05, 10]
   bool cull_unboxed_movers = true;         // moving point clusters outside boxes are culled too
+  // Most of the scene outside the boxes is static: when more than this share of the points the camera
+  // motion was fitted on comes out moving, the fit is wrong (RANSAC failed and a poor prediction was
+  // kept), and flow decides nothing in this frame: boxes fall back to their class, no unboxed point
+  // is culled. 1 = never [0.05, 1].
+  double max_moving_share = 0.5;
   // A keypoint whose nearest tracked point (within this radius) is a confirmed mover is culled.
   double unboxed_radius_px = 30.0;  // px [1, 200]
   double cluster_radius_px = 60.0;  // a mover is confirmed with >= cluster_min_points movers this near
@@ -100,6 +105,7 @@ struct DynamicResult {
   std::vector<bool> flow_point_moving;
   std::string residual_used;           // "epipolar", "reprojection" or "none"
   int ego_inliers = 0;                 // RANSAC inliers of the camera-motion fit
+  bool ego_motion_rejected = false;    // most fitted points moved: flow decided nothing (max_moving_share)
   int culled = 0;                      // keypoints marked dynamic
   bool still_people_released = false;  // people proven still were kept: too few keypoints without them
   double ms = 0;                       // wall time of process()

@@ -299,6 +299,11 @@ FrameReport SlamSystem::process(const io::FrameData& data) {
     times_.add("dynamic", watch.elapsed_ms());
     if (culled.detection_used && culled.detector_ms > 0) times_.add("detector", culled.detector_ms);
     if (culled.stale_wait_ms > 0) times_.add("stale_wait", culled.stale_wait_ms);
+    if (culled.result.ego_motion_rejected) {
+      ++ego_motion_rejected_;
+      spdlog::debug("frame {}: camera-motion fit of the motion check rejected (most points moved)",
+                    data.index);
+    }
     dynamic = std::move(culled.drop);
     suspect = std::move(culled.suspect);
   }
@@ -330,6 +335,9 @@ FrameReport SlamSystem::process(const io::FrameData& data) {
   const track::MappingStatus mapping{mapping_stage_->idle(), mapping_stage_->queued()};
   const track::TrackOutcome outcome = tracker_.track(frame, mapping);
   times_.add("track", watch.elapsed_ms());
+  spdlog::debug("frame {}: {} features, {} culled, {} tracked inliers, {}{}", data.index,
+                frame.features.size(), frame.culled, outcome.inliers, track::to_string(outcome.state),
+                outcome.new_keyframe != map::kNoKeyframe ? ", keyframe" : "");
   if (outcome.new_keyframe != map::kNoKeyframe) {
     ++keyframes_created_;
     if (!mapping.idle) mapping_stage_->interrupt_ba();
@@ -438,6 +446,7 @@ nlohmann::json SlamSystem::statistics() {
   j["detector_model"] = culling_.model_file().string();  // empty when no detector ran
   j["culled_features_total"] = culled_total_;
   j["refilled_features_total"] = refilled_total_;
+  j["ego_motion_rejected_frames"] = ego_motion_rejected_;
   if (culling_score_) j["culling_score"] = culling_score_->to_json();
   j["culled_features_per_frame"] =
       frames_ > 0 ? static_cast<double>(culled_total_) / static_cast<double>(frames_) : 0.0;

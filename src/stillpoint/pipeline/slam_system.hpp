@@ -105,7 +105,8 @@ class SlamSystem {
   std::unique_ptr<LocalMappingStage> mapping_stage_;
   std::size_t frames_ = 0;
   std::size_t culled_total_ = 0;
-  std::size_t refilled_total_ = 0;  // features added by FrontEnd::refill
+  std::size_t refilled_total_ = 0;       // features added by FrontEnd::refill
+  std::size_t ego_motion_rejected_ = 0;  // frames whose camera-motion fit the motion check rejected
   std::size_t keyframes_created_ = 0;
   bool finished_ = false;
   double vocabulary_load_ms_ = 0;
