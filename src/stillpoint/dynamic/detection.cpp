@@ -97,7 +97,7 @@ void DetectorConfig::fit_input_to_image(int long_side, int image_width, int imag
   if (long_side < 32 || image_width <= 0 || image_height <= 0)
     throw Error("detector input: long side " + std::to_string(long_side) + " px for a " +
                 std::to_string(image_width) + "x" + std::to_string(image_height) + " image is not usable");
-  const auto up32 = [](double v) { return std::max(32, static_cast<int>(std::ceil(v / 32.0)) * 32); };
+  const auto up32 = [](double v) { return static_cast<int>(std::ceil(v / 32.0)) * 32; };  // v > 0: >= 32
   const double scale = static_cast<double>(long_side) / std::max(image_width, image_height);
   input_width = up32(image_width * scale);
   input_height = up32(image_height * scale);

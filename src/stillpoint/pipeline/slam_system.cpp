@@ -299,11 +299,7 @@ FrameReport SlamSystem::process(const io::FrameData& data) {
     times_.add("dynamic", watch.elapsed_ms());
     if (culled.detection_used && culled.detector_ms > 0) times_.add("detector", culled.detector_ms);
     if (culled.stale_wait_ms > 0) times_.add("stale_wait", culled.stale_wait_ms);
-    if (culled.result.ego_motion_rejected) {
-      ++ego_motion_rejected_;
-      spdlog::debug("frame {}: camera-motion fit of the motion check rejected (most points moved)",
-                    data.index);
-    }
+    if (culled.result.ego_motion_rejected) ++ego_motion_rejected_;
     dynamic = std::move(culled.drop);
     suspect = std::move(culled.suspect);
   }
@@ -335,8 +331,10 @@ FrameReport SlamSystem::process(const io::FrameData& data) {
   const track::MappingStatus mapping{mapping_stage_->idle(), mapping_stage_->queued()};
   const track::TrackOutcome outcome = tracker_.track(frame, mapping);
   times_.add("track", watch.elapsed_ms());
-  spdlog::debug("frame {}: {} features, {} culled, {} tracked inliers, {}{}", data.index,
-                frame.features.size(), frame.culled, outcome.inliers, track::to_string(outcome.state),
+  spdlog::debug("frame {}: {} features, {} culled{}, {} tracked inliers, {}{}", data.index,
+                frame.features.size(), frame.culled,
+                culled.result.ego_motion_rejected ? " (motion-check camera fit rejected)" : "",
+                outcome.inliers, track::to_string(outcome.state),
                 outcome.new_keyframe != map::kNoKeyframe ? ", keyframe" : "");
   if (outcome.new_keyframe != map::kNoKeyframe) {
     ++keyframes_created_;
