@@ -39,10 +39,11 @@ NormalEquations accumulate(const Problem& p, const geo::SE3& T, bool with_jacobi
     ++ne.used;
     if (!with_jacobian) continue;
     // Unused rows of the monocular residual and Jacobian are zero, so 3 rows serve both cases.
-    ne.H.selfadjointView<Eigen::Upper>().rankUpdate(rep.J_pose.transpose(), w);
+    // A fixed-size product Eigen evaluates inline: rankUpdate goes through its blocked GEMM kernel,
+    // ~5x slower at 6x3, and this loop runs for every observation of every LM iteration.
+    ne.H.noalias() += w * rep.J_pose.transpose() * rep.J_pose;
     ne.g.noalias() += w * rep.J_pose.transpose() * rep.residual;
   }
-  ne.H.triangularView<Eigen::StrictlyLower>() = ne.H.transpose();
   return ne;
 }
 
