@@ -69,11 +69,18 @@ void Tracker::start_in_existing_map() {
 }
 
 TrackOutcome Tracker::track(Frame& frame, const MappingStatus& mapping) {
+  lock_clock_.take();
+  TrackOutcome out = track_frame(frame, mapping);
+  last_lock_ms_ = lock_clock_.take();  // every view of the frame has ended here
+  return out;
+}
+
+TrackOutcome Tracker::track_frame(Frame& frame, const MappingStatus& mapping) {
   TrackOutcome out;
   frame.reset_matches();
   refined_.assign(frame.features.size(), false);
   frame.grid = map::make_feature_grid(frame.features.keypoints, camera_.width, camera_.height);
-  map::MapView view = map_.view();
+  map::MapView view = map_.view(&lock_clock_);
 
   if (state_ == TrackingState::NotInitialized) {
     if (initialize(view, frame)) {

@@ -80,6 +80,8 @@ class Tracker {
           map::ScalePyramid pyramid, double fps);
 
   TrackOutcome track(Frame& frame, const MappingStatus& mapping);
+  // Milliseconds the last track() held the map lock, all its views together.
+  [[nodiscard]] double last_lock_ms() const { return last_lock_ms_; }
 
   // The map holds a loaded map: frames relocalise in it instead of starting a new map, and count as
   // lost until one does. Call before the first frame.
@@ -103,6 +105,7 @@ class Tracker {
   [[nodiscard]] std::optional<geo::SE3> predicted_motion() const { return velocity_; }
 
  private:
+  TrackOutcome track_frame(Frame& frame, const MappingStatus& mapping);
   bool initialize(map::MapView& view, Frame& frame);
   bool track_motion_model(map::MapView& view, Frame& frame);
   bool track_reference_keyframe(map::MapView& view, Frame& frame);
@@ -154,7 +157,9 @@ class Tracker {
   PoseGuardRules guard_;
   PoseGuardStats guard_stats_;
   AnchorRefiner refiner_;
-  std::vector<bool> refined_;  // per feature of the frame being tracked: position aligned with the anchor
+  std::vector<bool> refined_;      // per feature of the frame being tracked: position aligned with the anchor
+  map::LockHoldClock lock_clock_;  // every view the tracker takes is timed on it
+  double last_lock_ms_ = 0;
 };
 
 }  // namespace sp::track
