@@ -80,15 +80,27 @@ TrackOutcome Tracker::track_frame(Frame& frame, const MappingStatus& mapping) {
   frame.reset_matches();
   refined_.assign(frame.features.size(), false);
   frame.grid = map::make_feature_grid(frame.features.keypoints, camera_.width, camera_.height);
-  map::MapView view = map_.view(&lock_clock_);
+  snapshot_.reset(refiner_.anchor_ids());
+  counters_.clear();
 
   if (state_ == TrackingState::NotInitialized) {
+    map::MapView view = map_.view(&lock_clock_);
     if (initialize(view, frame)) {
       state_ = TrackingState::Ok;
       out.new_keyframe = reference_;
+      record_pose(frame, view.keyframe(reference_)->T_cw, out);
     }
   } else {
-    refresh_last_frame(view);
+    std::uint64_t changes_at_read = 0;  // loop corrections seen when the frame's reads began
+    {
+      // A short read: the last frame's points, followed through replacements, and their copies.
+      map::MapReader view = map_.reader(&lock_clock_);
+      refresh_last_frame(view);
+      changes_at_read = map_.big_change_count();
+      for (map::PointId pid : last_frame_.points) {
+        if (pid != map::kNoPoint) snapshot_.add(view, pid);
+      }
+    }
     bool ok = false;
     bool by_motion = false;
     std::optional<geo::SE3> predicted;
@@ -102,13 +114,13 @@ TrackOutcome Tracker::track_frame(Frame& frame, const MappingStatus& mapping) {
     bool relocalized = false;
     why_lost_.clear();
     if (state_ == TrackingState::Ok) {
-      if (velocity_) ok = by_motion = track_motion_model(view, frame);
-      if (!ok) ok = track_reference_keyframe(view, frame);
+      if (velocity_) ok = by_motion = track_motion_model(frame);
+      if (!ok) ok = track_reference_keyframe(frame);
     } else {
       ++reloc_stats_.attempts;
-      ok = relocalized = relocalize(view, frame);
+      ok = relocalized = relocalize(frame);
     }
-    if (ok) ok = track_local_map(view, frame);
+    if (ok) ok = track_local_map(frame);
     if (ok && relocalized) {
       ++reloc_stats_.poses_found;
       out.relocalized = true;
@@ -128,7 +140,12 @@ TrackOutcome Tracker::track_frame(Frame& frame, const MappingStatus& mapping) {
         ok = false;
       }
     }
-    const bool jumped = ok && predicted && guard_pose(view, frame, *predicted);
+    const bool jumped = ok && predicted && guard_pose(frame, *predicted);
+
+    // Write back: counters, the keyframe decision and the keyframe. Points or keyframes other stages
+    // culled or fused since the reads are resolved again here (or skipped).
+    map::MapView view = map_.view(&lock_clock_);
+    counters_.apply(view);
     if (ok) {
       if (last_frame_.has_pose) velocity_ = frame.T_cw * last_frame_.T_cw.inverse();
       state_ = TrackingState::Ok;
@@ -136,6 +153,10 @@ TrackOutcome Tracker::track_frame(Frame& frame, const MappingStatus& mapping) {
       if (verify_left_ == 0 && need_keyframe(view, frame, mapping)) {
         if (jumped) {
           ++guard_stats_.keyframes_vetoed;
+        } else if (map_.big_change_count() != changes_at_read) {
+          // A loop correction moved the map while this frame was tracked on copies: its pose is in
+          // the old frame, so it must not seed a keyframe and points (the next frame will).
+          spdlog::debug("frame {}: no keyframe, the map was corrected while it was tracked", frame.index);
         } else {
           out.new_keyframe = create_keyframe(view, frame);
         }
@@ -147,20 +168,14 @@ TrackOutcome Tracker::track_frame(Frame& frame, const MappingStatus& mapping) {
       velocity_.reset();
       ++lost_frames_;
     }
-  }
-
-  if (state_ == TrackingState::Ok && frame.has_pose) {
-    frame.reference = reference_;
-    const map::Keyframe* ref = view.keyframe(reference_);
-    const TrajectoryEntry entry{frame.index, frame.stamp, reference_, frame.T_cw * ref->T_cw.inverse()};
-    if (verify_left_ > 0) {
-      unverified_.push_back(entry);
-      ++lost_frames_;  // until the verification passes
-      out.verifying = true;
-    } else {
-      trajectory_.record(entry);
+    if (state_ == TrackingState::Ok && frame.has_pose) {
+      // The reference's pose as the frame was tracked against it (a keyframe made just now is not in
+      // the snapshot: its pose is the frame's).
+      const LocalMapSnapshot::Pose* ref = snapshot_.pose(reference_);
+      record_pose(frame, ref != nullptr ? ref->T_cw : view.keyframe(reference_)->T_cw, out);
     }
   }
+
   out.state = out.verifying ? TrackingState::Lost : state_;
   out.inliers = frame.matched();
   // Outliers are forgotten so the next frame does not project them.
@@ -170,6 +185,18 @@ TrackOutcome Tracker::track_frame(Frame& frame, const MappingStatus& mapping) {
   last_frame_ = frame;
   if (state_ != TrackingState::Ok) last_frame_.has_pose = false;
   return out;
+}
+
+void Tracker::record_pose(Frame& frame, const geo::SE3& reference_T_cw, TrackOutcome& out) {
+  frame.reference = reference_;
+  const TrajectoryEntry entry{frame.index, frame.stamp, reference_, frame.T_cw * reference_T_cw.inverse()};
+  if (verify_left_ > 0) {
+    unverified_.push_back(entry);
+    ++lost_frames_;  // until the verification passes
+    out.verifying = true;
+  } else {
+    trajectory_.record(entry);
+  }
 }
 
 bool Tracker::consistent_after_relocalization(const Frame& frame, const geo::SE3& expected_T_cw) const {
@@ -201,7 +228,7 @@ bool Tracker::initialize(map::MapView& view, Frame& frame) {
   return true;
 }
 
-void Tracker::refresh_last_frame(map::MapView& view) {
+void Tracker::refresh_last_frame(const map::MapReader& view) {
   // Points may have been fused by local mapping: follow replacements.
   for (auto& pid : last_frame_.points) {
     if (pid == map::kNoPoint) continue;
@@ -221,47 +248,51 @@ void Tracker::refresh_last_frame(map::MapView& view) {
   }
 }
 
-bool Tracker::track_motion_model(map::MapView& view, Frame& frame) {
+bool Tracker::track_motion_model(Frame& frame) {
   frame.T_cw = *velocity_ * last_frame_.T_cw;
   const MatchContext ctx{camera_, pyramid_, depth_.bf};
-  int matches = match_last_frame(view, frame, last_frame_, config_.motion_search_radius, ctx);
+  int matches = match_last_frame(snapshot_, frame, last_frame_, config_.motion_search_radius, ctx);
   if (matches < config_.min_motion_matches) {
     frame.reset_matches();
-    matches = match_last_frame(view, frame, last_frame_, 2.0 * config_.motion_search_radius, ctx);
+    matches = match_last_frame(snapshot_, frame, last_frame_, 2.0 * config_.motion_search_radius, ctx);
   }
   if (matches < config_.min_motion_matches) {
     why_lost_ += fmt::format(" motion model {} matches;", matches);
     return false;
   }
   frame.has_pose = true;
-  const int inliers = optimize_pose(view, frame);
+  const int inliers = optimize_pose(frame);
   if (inliers < 10) why_lost_ += fmt::format(" motion model {} inliers of {} matches;", inliers, matches);
   return inliers >= 10;
 }
 
-bool Tracker::track_reference_keyframe(map::MapView& view, Frame& frame) {
-  const map::Keyframe* ref = view.keyframe(reference_);
-  if (ref == nullptr) return false;
+bool Tracker::track_reference_keyframe(Frame& frame) {
+  std::optional<LocalMapSnapshot::Keyframe> ref;
+  {
+    map::MapReader view = map_.reader(&lock_clock_);
+    ref = snapshot_.add_keyframe(view, reference_);
+  }
+  if (!ref) return false;
   frame.reset_matches();
-  const int matches = match_keyframe(view, frame, *ref, 0.7f);
+  const int matches = match_keyframe(*ref, frame, 0.7f);
   if (matches < 15) {
     why_lost_ += fmt::format(" reference keyframe {} matches;", matches);
     return false;
   }
   frame.T_cw = last_frame_.has_pose ? last_frame_.T_cw : ref->T_cw;
   frame.has_pose = true;
-  const int inliers = optimize_pose(view, frame);
+  const int inliers = optimize_pose(frame);
   if (inliers < 10)
     why_lost_ += fmt::format(" reference keyframe {} inliers of {} matches;", inliers, matches);
   return inliers >= 10;
 }
 
-int Tracker::optimize_pose(map::MapView& view, Frame& frame) {
+int Tracker::optimize_pose(Frame& frame) {
   std::vector<opt::PoseObservation> obs;
   std::vector<std::size_t> feature_of;
   for (std::size_t i = 0; i < frame.points.size(); ++i) {
     if (frame.points[i] == map::kNoPoint) continue;
-    const map::MapPoint* p = view.live_point(frame.points[i]);
+    const LocalMapSnapshot::Point* p = snapshot_.live_point(frame.points[i]);
     if (p == nullptr) {
       frame.points[i] = map::kNoPoint;
       continue;
@@ -287,7 +318,7 @@ int Tracker::optimize_pose(map::MapView& view, Frame& frame) {
   return inliers;
 }
 
-void Tracker::update_local_map(map::MapView& view, Frame& frame) {
+void Tracker::update_local_map(const map::MapReader& view, Frame& frame) {
   // Local keyframes: those observing the frame's points, their best covisibles, children and parent.
   std::map<map::KeyframeId, int> counter;
   for (std::size_t i = 0; i < frame.points.size(); ++i) {
@@ -339,12 +370,23 @@ void Tracker::update_local_map(map::MapView& view, Frame& frame) {
       if (pid == map::kNoPoint || seen.contains(pid)) continue;
       seen.insert(pid);
       local_points_.push_back(pid);
+      snapshot_.add(view, pid);
     }
   }
 }
 
-bool Tracker::track_local_map(map::MapView& view, Frame& frame) {
-  update_local_map(view, frame);
+bool Tracker::track_local_map(Frame& frame) {
+  {
+    // A short read: the local map around the frame's matches, copied with the poses the refiner and
+    // the trajectory use. Matches are copied again so that every read of this frame sees one state.
+    map::MapReader view = map_.reader(&lock_clock_);
+    for (map::PointId pid : frame.points) {
+      if (pid != map::kNoPoint) snapshot_.add(view, pid);
+    }
+    update_local_map(view, frame);
+    for (map::KeyframeId anchor : refiner_.anchor_ids()) snapshot_.add_pose(view, anchor);
+    snapshot_.add_pose(view, reference_);
+  }
   // Matched points count as seen; the local search marks the rest it projects as visible.
   for (std::size_t i = 0; i < frame.points.size(); ++i) {
     if (frame.points[i] == map::kNoPoint) continue;
@@ -353,18 +395,19 @@ bool Tracker::track_local_map(map::MapView& view, Frame& frame) {
       frame.outlier[i] = false;
       continue;
     }
-    if (map::MapPoint* p = view.live_point(frame.points[i])) ++p->visible;
+    if (snapshot_.live_point(frame.points[i]) != nullptr) counters_.visible(frame.points[i]);
   }
   const bool recently_relocalized = frame.index < last_reloc_frame_ + static_cast<std::size_t>(fps_);
   const double factor =
       recently_relocalized ? 2.0 * config_.local_search_factor : config_.local_search_factor;
-  match_local_points(view, frame, local_points_, factor, MatchContext{camera_, pyramid_, depth_.bf});
-  int inliers = optimize_pose(view, frame);
-  if (inliers >= config_.min_inliers && refiner_.refine(view, frame, refined_) > 0)
-    inliers = optimize_pose(view, frame);
+  match_local_points(snapshot_, frame, local_points_, factor, MatchContext{camera_, pyramid_, depth_.bf},
+                     counters_);
+  int inliers = optimize_pose(frame);
+  if (inliers >= config_.min_inliers && refiner_.refine(snapshot_, frame, refined_) > 0)
+    inliers = optimize_pose(frame);
   for (std::size_t i = 0; i < frame.points.size(); ++i) {
     if (frame.points[i] == map::kNoPoint || frame.outlier[i]) continue;
-    if (map::MapPoint* p = view.live_point(frame.points[i])) ++p->found;
+    if (snapshot_.live_point(frame.points[i]) != nullptr) counters_.found(frame.points[i]);
   }
   const int needed =
       recently_relocalized && relocalized_once_ ? config_.min_inliers_after_reloc : config_.min_inliers;
@@ -372,7 +415,7 @@ bool Tracker::track_local_map(map::MapView& view, Frame& frame) {
   return inliers >= needed;
 }
 
-bool Tracker::guard_pose(map::MapView& view, Frame& frame, const geo::SE3& predicted_T_cw) {
+bool Tracker::guard_pose(Frame& frame, const geo::SE3& predicted_T_cw) {
   if (frame.suspect.size() != frame.points.size()) return false;
   const PoseDeviation before = pose_deviation(frame.T_cw, predicted_T_cw);
   if (!guard_.is_jump(before)) return false;
@@ -391,7 +434,7 @@ bool Tracker::guard_pose(map::MapView& view, Frame& frame, const geo::SE3& predi
     if (frame.suspect[i]) frame.points[i] = map::kNoPoint;
   }
   frame.T_cw = predicted_T_cw;
-  const int kept = optimize_pose(view, frame);
+  const int kept = optimize_pose(frame);
   const PoseDeviation after = pose_deviation(frame.T_cw, predicted_T_cw);
   if (guard_.accepts_resolve(before, after, kept, config_.min_inliers)) {
     ++guard_stats_.resolved;
@@ -408,7 +451,10 @@ bool Tracker::guard_pose(map::MapView& view, Frame& frame, const geo::SE3& predi
   return true;
 }
 
-bool Tracker::relocalize(map::MapView& view, Frame& frame) {
+bool Tracker::relocalize(Frame& frame) {
+  // Rare (the frame is lost), so one view over the whole search; the candidates' records and the
+  // local map are still read through the snapshot, as tracking does.
+  map::MapView view = map_.view(&lock_clock_);
   // Candidates: those of the provider (a BoW query over every keyframe of the map) first, then the
   // most recent keyframes and the covisibles of the last reference.
   std::vector<map::KeyframeId> ids = view.keyframe_ids_sorted();
@@ -428,17 +474,17 @@ bool Tracker::relocalize(map::MapView& view, Frame& frame) {
     candidates = std::move(first);
   }
   for (map::KeyframeId kid : candidates) {
-    const map::Keyframe* kf = view.keyframe(kid);
-    if (kf == nullptr || kf->bad) continue;
+    const std::optional<LocalMapSnapshot::Keyframe> kf = snapshot_.add_keyframe(view, kid);
+    if (!kf || kf->bad) continue;
     ++reloc_stats_.candidates_tried;
     frame.reset_matches();
-    if (match_keyframe(view, frame, *kf, 0.75f) < 15) continue;
+    if (match_keyframe(*kf, frame, 0.75f) < 15) continue;
     std::vector<cv::Point3f> object;
     std::vector<cv::Point2f> image;
     std::vector<std::size_t> feature_of;
     for (std::size_t i = 0; i < frame.points.size(); ++i) {
       if (frame.points[i] == map::kNoPoint) continue;
-      const map::MapPoint* p = view.live_point(frame.points[i]);
+      const LocalMapSnapshot::Point* p = snapshot_.live_point(frame.points[i]);
       if (p == nullptr) continue;
       object.emplace_back(static_cast<float>(p->position.x()), static_cast<float>(p->position.y()),
                           static_cast<float>(p->position.z()));
@@ -462,12 +508,12 @@ bool Tracker::relocalize(map::MapView& view, Frame& frame) {
     }
     frame.T_cw = geo::SE3(Eigen::Quaterniond(Re).normalized(), te);
     frame.has_pose = true;
-    if (optimize_pose(view, frame) < 10) continue;
+    if (optimize_pose(frame) < 10) continue;
     // Recover more matches by projection before accepting.
     update_local_map(view, frame);
-    match_local_points(view, frame, local_points_, 2.0 * config_.local_search_factor,
-                       MatchContext{camera_, pyramid_, depth_.bf});
-    if (optimize_pose(view, frame) >= config_.min_inliers_after_reloc) {
+    match_local_points(snapshot_, frame, local_points_, 2.0 * config_.local_search_factor,
+                       MatchContext{camera_, pyramid_, depth_.bf}, counters_);
+    if (optimize_pose(frame) >= config_.min_inliers_after_reloc) {
       reference_ = kid;
       last_reloc_frame_ = frame.index;
       relocalized_once_ = true;
@@ -479,7 +525,8 @@ bool Tracker::relocalize(map::MapView& view, Frame& frame) {
   return false;
 }
 
-bool Tracker::need_keyframe(map::MapView& view, const Frame& frame, const MappingStatus& mapping) const {
+bool Tracker::need_keyframe(const map::MapReader& view, const Frame& frame,
+                            const MappingStatus& mapping) const {
   KeyframeCandidate c;
   c.frames_since_keyframe = frame.index - last_keyframe_frame_;
   c.fps = fps_;

@@ -1,7 +1,9 @@
 #pragma once
 // Frame-to-map tracking: constant-velocity prediction, reference-keyframe fallback, relocalisation,
-// local-map tracking and the keyframe decision. Runs in the tracking thread; touches the map only
-// through short MapViews.
+// local-map tracking and the keyframe decision. Runs in the tracking thread. Matching, pose
+// optimisation, the sub-pixel refiner and the pose guard work on a LocalMapSnapshot copied under
+// short MapReaders; counters and keyframes are written back under one MapView at the end of the
+// frame. Relocalisation (rare) searches under one view.
 #include <functional>
 #include <memory>
 #include <optional>
@@ -13,6 +15,7 @@
 #include "stillpoint/tracking/anchor_refiner.hpp"
 #include "stillpoint/tracking/frame.hpp"
 #include "stillpoint/tracking/keyframe_policy.hpp"
+#include "stillpoint/tracking/local_map_snapshot.hpp"
 #include "stillpoint/tracking/pose_guard.hpp"
 #include "stillpoint/tracking/trajectory_recorder.hpp"
 
@@ -106,22 +109,25 @@ class Tracker {
 
  private:
   TrackOutcome track_frame(Frame& frame, const MappingStatus& mapping);
+  // Writes the tracked frame's pose relative to its reference keyframe (held back while verifying).
+  void record_pose(Frame& frame, const geo::SE3& reference_T_cw, TrackOutcome& out);
   bool initialize(map::MapView& view, Frame& frame);
-  bool track_motion_model(map::MapView& view, Frame& frame);
-  bool track_reference_keyframe(map::MapView& view, Frame& frame);
-  bool relocalize(map::MapView& view, Frame& frame);
+  bool track_motion_model(Frame& frame);
+  bool track_reference_keyframe(Frame& frame);
+  bool relocalize(Frame& frame);
   // One frame of the check after a relocalisation: true while the frame agrees with the relocalised
   // pose's motion (see TrackerConfig::relocalization_verify_frames).
   [[nodiscard]] bool consistent_after_relocalization(const Frame& frame, const geo::SE3& expected_T_cw) const;
   // The relocalised pose passed its check: counted, and the frames tracked from it are written.
   void accept_relocalization();
-  bool track_local_map(map::MapView& view, Frame& frame);
+  bool track_local_map(Frame& frame);
   // The pose guard (PoseGuardConfig). True when the frame jumped: it must not become a keyframe.
-  bool guard_pose(map::MapView& view, Frame& frame, const geo::SE3& predicted_T_cw);
-  int optimize_pose(map::MapView& view, Frame& frame);
-  void update_local_map(map::MapView& view, Frame& frame);
-  void refresh_last_frame(map::MapView& view);
-  [[nodiscard]] bool need_keyframe(map::MapView& view, const Frame& frame,
+  bool guard_pose(Frame& frame, const geo::SE3& predicted_T_cw);
+  int optimize_pose(Frame& frame);
+  // Picks the local keyframes and points around the frame's matches and copies the points.
+  void update_local_map(const map::MapReader& view, Frame& frame);
+  void refresh_last_frame(const map::MapReader& view);
+  [[nodiscard]] bool need_keyframe(const map::MapReader& view, const Frame& frame,
                                    const MappingStatus& mapping) const;
   map::KeyframeId create_keyframe(map::MapView& view, Frame& frame);
 
@@ -158,6 +164,8 @@ class Tracker {
   PoseGuardStats guard_stats_;
   AnchorRefiner refiner_;
   std::vector<bool> refined_;      // per feature of the frame being tracked: position aligned with the anchor
+  LocalMapSnapshot snapshot_;      // the map records this frame reads, copied under short readers
+  PointCounterUpdates counters_;   // ... and the counters it raises, written back at the end
   map::LockHoldClock lock_clock_;  // every view the tracker takes is timed on it
   double last_lock_ms_ = 0;
 };
