@@ -2,11 +2,31 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include "stillpoint/common/error.hpp"
 #include "stillpoint/features/descriptor.hpp"
 
 namespace sp::map {
+
+namespace {
+
+// MapReader::weighted_observations, stopping once it reaches `enough`.
+int weighted_observations_upto(const std::unordered_map<KeyframeId, Keyframe>& keyframes, const MapPoint& p,
+                               int enough) {
+  int n = 0;
+  for (const auto& [kid, feature] : p.observations) {
+    if (n >= enough) break;
+    const auto kit = keyframes.find(kid);
+    if (kit == keyframes.end()) continue;
+    const auto& u_right = kit->second.features.u_right;
+    const auto f = static_cast<std::size_t>(feature);
+    n += f < u_right.size() && u_right[f] >= 0 ? 2 : 1;
+  }
+  return n;
+}
+
+}  // namespace
 
 int MapPoint::predict_level(double distance, const ScalePyramid& pyramid) const {
   return map::predict_level(max_distance, distance, pyramid);
@@ -200,14 +220,18 @@ void MapView::update_point_normal_and_depth(PointId pid, const ScalePyramid& pyr
 void MapView::update_connections(KeyframeId kid, int min_weight) {
   Keyframe* kf = keyframe(kid);
   if (kf == nullptr || kf->bad) return;
-  std::map<KeyframeId, int> counter;
+  // Counted in a hash map, then visited by increasing id (as a std::map would, at a fraction of the
+  // cost: the tracker runs this under its write-back view).
+  std::unordered_map<KeyframeId, int> counts;
   for (PointId pid : kf->points) {
     const MapPoint* p = pid == kNoPoint ? nullptr : point(pid);
     if (p == nullptr || p->bad) continue;
     for (const auto& [other, feature] : p->observations) {
-      if (other != kid) ++counter[other];
+      if (other != kid) ++counts[other];
     }
   }
+  std::vector<std::pair<KeyframeId, int>> counter(counts.begin(), counts.end());
+  std::sort(counter.begin(), counter.end());
   // Drop old back edges, then add the new ones.
   for (const auto& [other, w] : kf->covisibility) {
     if (Keyframe* o = keyframe(other)) o->covisibility.erase(kid);
@@ -268,21 +292,14 @@ int MapReader::tracked_points(KeyframeId kid, int min_observations) const {
     if (pid == kNoPoint) continue;
     const auto pit = map_.points_.find(pid);
     if (pit == map_.points_.end() || pit->second.bad) continue;
-    if (weighted_observations(pit->second) >= min_observations) ++n;
+    // Only whether it reaches the threshold matters: this runs under the tracker's write-back view.
+    if (weighted_observations_upto(map_.keyframes_, pit->second, min_observations) >= min_observations) ++n;
   }
   return n;
 }
 
 int MapReader::weighted_observations(const MapPoint& p) const {
-  int n = 0;
-  for (const auto& [kid, feature] : p.observations) {
-    const auto kit = map_.keyframes_.find(kid);
-    if (kit == map_.keyframes_.end()) continue;
-    const auto& u_right = kit->second.features.u_right;
-    const auto f = static_cast<std::size_t>(feature);
-    n += f < u_right.size() && u_right[f] >= 0 ? 2 : 1;
-  }
-  return n;
+  return weighted_observations_upto(map_.keyframes_, p, std::numeric_limits<int>::max());
 }
 
 bool MapView::hold_keyframe(KeyframeId kid) {

@@ -10,6 +10,7 @@ void LocalMapSnapshot::reset(std::vector<map::KeyframeId> anchors) {
   anchor_features_.clear();
   index_.clear();
   poses_.clear();
+  unindexed_.clear();
   anchors_ = std::move(anchors);
 }
 
@@ -23,29 +24,62 @@ const LocalMapSnapshot::Point* LocalMapSnapshot::add(const map::MapReader& view,
     }
     return nullptr;
   }
-  std::size_t slot = points_.size();
-  if (const auto it = index_.find(p->id); it != index_.end()) {
-    slot = it->second;
-  } else {
+  const auto [it, inserted] = index_.try_emplace(p->id, points_.size());
+  const std::size_t slot = it->second;
+  if (inserted) {
     points_.emplace_back();
     anchor_features_.resize(points_.size() * anchors_.size(), -1);
   }
+  copy(*p, slot);
+  if (id != p->id) index_[id] = slot;
+  return &points_[slot];
+}
+
+void LocalMapSnapshot::copy(const map::MapPoint& p, std::size_t slot) {
   Point& c = points_[slot];
-  c.id = p->id;
-  c.position = p->position;
-  c.normal = p->normal;
-  c.min_distance = p->min_distance;
-  c.max_distance = p->max_distance;
+  c.id = p.id;
+  c.position = p.position;
+  c.normal = p.normal;
+  c.min_distance = p.min_distance;
+  c.max_distance = p.max_distance;
   const std::size_t bytes =
-      std::min<std::size_t>(c.descriptor.size(), p->descriptor.total() * p->descriptor.elemSize());
-  if (bytes > 0) std::memcpy(c.descriptor.data(), p->descriptor.ptr<std::uint8_t>(), bytes);
+      std::min<std::size_t>(c.descriptor.size(), p.descriptor.total() * p.descriptor.elemSize());
+  if (bytes > 0) std::memcpy(c.descriptor.data(), p.descriptor.ptr<std::uint8_t>(), bytes);
   for (std::size_t a = 0; a < anchors_.size(); ++a) {
-    const auto obs = p->observations.find(anchors_[a]);
-    anchor_features_[slot * anchors_.size() + a] = obs == p->observations.end() ? -1 : obs->second;
+    const auto obs = p.observations.find(anchors_[a]);
+    anchor_features_[slot * anchors_.size() + a] = obs == p.observations.end() ? -1 : obs->second;
   }
-  index_[p->id] = slot;
-  index_[id] = slot;
-  return &c;
+}
+
+void LocalMapSnapshot::copy_points(const map::MapReader& view, const std::vector<map::PointId>& ids) {
+  points_.reserve(points_.size() + ids.size());
+  anchor_features_.reserve(anchor_features_.size() + ids.size() * anchors_.size());
+  for (map::PointId id : ids) {
+    const map::MapPoint* p = view.live_point(id);
+    if (p == nullptr) {
+      unindexed_.emplace_back(id, kGone);
+      continue;
+    }
+    points_.emplace_back();
+    anchor_features_.resize(points_.size() * anchors_.size(), -1);
+    copy(*p, points_.size() - 1);
+    unindexed_.emplace_back(id, points_.size() - 1);
+  }
+}
+
+void LocalMapSnapshot::index_copies() {
+  for (const auto& [id, slot] : unindexed_) {
+    if (slot == kGone) {
+      if (const auto it = index_.find(id); it != index_.end()) {
+        index_.erase(points_[it->second].id);
+        index_.erase(id);
+      }
+      continue;
+    }
+    index_[points_[slot].id] = slot;  // a newer copy of a point copied before replaces it
+    index_[id] = slot;
+  }
+  unindexed_.clear();
 }
 
 const LocalMapSnapshot::Point* LocalMapSnapshot::live_point(map::PointId id) const {

@@ -48,6 +48,10 @@ class LocalMapSnapshot {
   // Copies the live point behind `id` (following replacements); found afterwards under `id` and under
   // its live id. A copy already there is refreshed; one whose point has gone since is forgotten.
   const Point* add(const map::MapReader& view, map::PointId id);
+  // Copies many points under one read as add() does, but leaves the hashing for index_copies(), to be
+  // called after the read ends: until then the copies are not found.
+  void copy_points(const map::MapReader& view, const std::vector<map::PointId>& ids);
+  void index_copies();
   // The copy for an id given to add() or a live id it resolved to; nullptr when none.
   [[nodiscard]] const Point* live_point(map::PointId id) const;
   // The feature observing the point in `anchor`, -1 when none (or the anchor was not given to reset()).
@@ -63,9 +67,13 @@ class LocalMapSnapshot {
   [[nodiscard]] std::size_t size() const { return points_.size(); }
 
  private:
+  void copy(const map::MapPoint& p, std::size_t slot);
+
   std::vector<Point> points_;
   std::vector<int> anchor_features_;  // points_.size() x anchors_.size(), row per point
   std::unordered_map<map::PointId, std::size_t> index_;
+  static constexpr std::size_t kGone = static_cast<std::size_t>(-1);
+  std::vector<std::pair<map::PointId, std::size_t>> unindexed_;  // copy_points(): (id asked, slot or kGone)
   std::vector<map::KeyframeId> anchors_;
   std::unordered_map<map::KeyframeId, Pose> poses_;
 };

@@ -84,12 +84,15 @@ TrackOutcome Tracker::track_frame(Frame& frame, const MappingStatus& mapping) {
   counters_.clear();
 
   if (state_ == TrackingState::NotInitialized) {
-    map::MapView view = map_.view(&lock_clock_);
-    if (initialize(view, frame)) {
-      state_ = TrackingState::Ok;
-      out.new_keyframe = reference_;
-      record_pose(frame, view.keyframe(reference_)->T_cw, out);
+    {
+      map::MapView view = map_.view(&lock_clock_);
+      if (initialize(view, frame)) {
+        state_ = TrackingState::Ok;
+        out.new_keyframe = reference_;
+        record_pose(frame, view.keyframe(reference_)->T_cw, out);
+      }
     }
+    if (out.new_keyframe != map::kNoKeyframe) refiner_.set_anchor(out.new_keyframe, frame);
   } else {
     std::uint64_t changes_at_read = 0;  // loop corrections seen when the frame's reads began
     {
@@ -97,9 +100,6 @@ TrackOutcome Tracker::track_frame(Frame& frame, const MappingStatus& mapping) {
       map::MapReader view = map_.reader(&lock_clock_);
       refresh_last_frame(view);
       changes_at_read = map_.big_change_count();
-      for (map::PointId pid : last_frame_.points) {
-        if (pid != map::kNoPoint) snapshot_.add(view, pid);
-      }
     }
     bool ok = false;
     bool by_motion = false;
@@ -142,37 +142,55 @@ TrackOutcome Tracker::track_frame(Frame& frame, const MappingStatus& mapping) {
     }
     const bool jumped = ok && predicted && guard_pose(frame, *predicted);
 
-    // Write back: counters, the keyframe decision and the keyframe. Points or keyframes other stages
-    // culled or fused since the reads are resolved again here (or skipped).
-    map::MapView view = map_.view(&lock_clock_);
-    counters_.apply(view);
-    if (ok) {
-      if (last_frame_.has_pose) velocity_ = frame.T_cw * last_frame_.T_cw.inverse();
-      state_ = TrackingState::Ok;
-      // No keyframe from a pose that is not verified yet.
-      if (verify_left_ == 0 && need_keyframe(view, frame, mapping)) {
-        if (jumped) {
-          ++guard_stats_.keyframes_vetoed;
-        } else if (map_.big_change_count() != changes_at_read) {
-          // A loop correction moved the map while this frame was tracked on copies: its pose is in
-          // the old frame, so it must not seed a keyframe and points (the next frame will).
-          spdlog::debug("frame {}: no keyframe, the map was corrected while it was tracked", frame.index);
-        } else {
-          out.new_keyframe = create_keyframe(view, frame);
+    // Write back: counters and the keyframe decision, then (in a second view, once the keyframe is
+    // drafted without the lock) the keyframe. Points or keyframes other stages culled or fused since
+    // the reads are resolved again there (or skipped).
+    bool make_keyframe = false;
+    {
+      map::MapView view = map_.view(&lock_clock_);
+      counters_.apply(view);
+      if (ok) {
+        if (last_frame_.has_pose) velocity_ = frame.T_cw * last_frame_.T_cw.inverse();
+        state_ = TrackingState::Ok;
+        // No keyframe from a pose that is not verified yet.
+        if (verify_left_ == 0 && need_keyframe(view, frame, mapping)) {
+          if (jumped) {
+            ++guard_stats_.keyframes_vetoed;
+          } else {
+            make_keyframe = true;
+          }
         }
+      } else {
+        // Once per loss, not on every failed relocalisation after it.
+        if (state_ == TrackingState::Ok) spdlog::info("frame {} lost:{}", frame.index, why_lost_);
+        state_ = TrackingState::Lost;
+        velocity_.reset();
+        ++lost_frames_;
       }
-    } else {
-      // Once per loss, not on every failed relocalisation after it.
-      if (state_ == TrackingState::Ok) spdlog::info("frame {} lost:{}", frame.index, why_lost_);
-      state_ = TrackingState::Lost;
-      velocity_.reset();
-      ++lost_frames_;
     }
+    if (make_keyframe) {
+      KeyframeDraft draft = draft_keyframe(frame);
+      map::MapView view = map_.view(&lock_clock_);
+      if (map_.big_change_count() != changes_at_read) {
+        // A loop correction moved the map while this frame was tracked on copies: its pose is in
+        // the old frame, so it must not seed a keyframe and points (the next frame will).
+        spdlog::debug("frame {}: no keyframe, the map was corrected while it was tracked", frame.index);
+      } else {
+        out.new_keyframe = create_keyframe(view, frame, std::move(draft));
+      }
+    }
+    if (out.new_keyframe != map::kNoKeyframe) refiner_.set_anchor(out.new_keyframe, frame);
     if (state_ == TrackingState::Ok && frame.has_pose) {
-      // The reference's pose as the frame was tracked against it (a keyframe made just now is not in
-      // the snapshot: its pose is the frame's).
+      // Relative to the reference's pose as the frame was tracked against it; a keyframe made just
+      // now has the frame's pose.
       const LocalMapSnapshot::Pose* ref = snapshot_.pose(reference_);
-      record_pose(frame, ref != nullptr ? ref->T_cw : view.keyframe(reference_)->T_cw, out);
+      if (out.new_keyframe != map::kNoKeyframe) {
+        record_pose(frame, frame.T_cw, out);
+      } else if (ref != nullptr) {
+        record_pose(frame, ref->T_cw, out);
+      } else {
+        spdlog::warn("frame {}: reference keyframe {} missing, pose not written", frame.index, reference_);
+      }
     }
   }
 
@@ -223,16 +241,16 @@ bool Tracker::initialize(map::MapView& view, Frame& frame) {
   if (with_depth < config_.init_min_features) return false;
   frame.T_cw = geo::SE3();
   frame.has_pose = true;
-  reference_ = create_keyframe(view, frame);
+  reference_ = create_keyframe(view, frame, draft_keyframe(frame));
   spdlog::info("map initialised at frame {} with {} points", frame.index, view.live_points());
   return true;
 }
 
 void Tracker::refresh_last_frame(const map::MapReader& view) {
-  // Points may have been fused by local mapping: follow replacements.
+  // Points may have been fused by local mapping: follow replacements (and copy them for matching).
   for (auto& pid : last_frame_.points) {
     if (pid == map::kNoPoint) continue;
-    const map::MapPoint* p = view.live_point(pid);
+    const LocalMapSnapshot::Point* p = snapshot_.add(view, pid);
     pid = p == nullptr ? map::kNoPoint : p->id;
   }
   // After a loop correction or BA the last frame moves with its reference keyframe.
@@ -320,14 +338,17 @@ int Tracker::optimize_pose(Frame& frame) {
 
 void Tracker::update_local_map(const map::MapReader& view, Frame& frame) {
   // Local keyframes: those observing the frame's points, their best covisibles, children and parent.
-  std::map<map::KeyframeId, int> counter;
+  // Counted in a hash map (kept for its buckets), then visited by increasing id.
+  keyframe_counts_.clear();
   for (std::size_t i = 0; i < frame.points.size(); ++i) {
     if (frame.points[i] == map::kNoPoint || frame.outlier[i]) continue;
     const map::MapPoint* p = view.live_point(frame.points[i]);
     if (p == nullptr) continue;
-    for (const auto& [kid, feature] : p->observations) ++counter[kid];
+    for (const auto& [kid, feature] : p->observations) ++keyframe_counts_[kid];
   }
-  if (counter.empty()) return;
+  if (keyframe_counts_.empty()) return;
+  std::vector<std::pair<map::KeyframeId, int>> counter(keyframe_counts_.begin(), keyframe_counts_.end());
+  std::sort(counter.begin(), counter.end());
   local_keyframes_.clear();
   std::unordered_set<map::KeyframeId> in_local;
   map::KeyframeId best = map::kNoKeyframe;
@@ -359,34 +380,49 @@ void Tracker::update_local_map(const map::MapReader& view, Frame& frame) {
   }
   if (best != map::kNoKeyframe) reference_ = best;
   frame.reference = reference_;
-
-  local_points_.clear();
-  std::unordered_set<map::PointId> seen;
-  for (std::size_t i = 0; i < frame.points.size(); ++i) {
-    if (frame.points[i] != map::kNoPoint) seen.insert(frame.points[i]);
-  }
+  // Only the slots are copied here; collect_local_points() picks the points without the lock.
+  local_slots_.clear();
   for (map::KeyframeId kid : local_keyframes_) {
-    for (map::PointId pid : view.keyframe(kid)->points) {
-      if (pid == map::kNoPoint || seen.contains(pid)) continue;
-      seen.insert(pid);
-      local_points_.push_back(pid);
-      snapshot_.add(view, pid);
-    }
+    const std::vector<map::PointId>& points = view.keyframe(kid)->points;
+    local_slots_.insert(local_slots_.end(), points.begin(), points.end());
+  }
+  local_slots_fresh_ = true;
+}
+
+void Tracker::collect_local_points(const Frame& frame) {
+  // Without a new local map (no match observed anywhere) the last one is searched again.
+  if (!local_slots_fresh_) return;
+  local_slots_fresh_ = false;
+  local_points_.clear();
+  seen_.clear();
+  for (std::size_t i = 0; i < frame.points.size(); ++i) {
+    if (frame.points[i] != map::kNoPoint) seen_.insert(frame.points[i]);
+  }
+  for (map::PointId pid : local_slots_) {
+    if (pid == map::kNoPoint || !seen_.insert(pid).second) continue;
+    local_points_.push_back(pid);
   }
 }
 
 bool Tracker::track_local_map(Frame& frame) {
   {
-    // A short read: the local map around the frame's matches, copied with the poses the refiner and
-    // the trajectory use. Matches are copied again so that every read of this frame sees one state.
+    // Two short reads: the local keyframes around the frame's matches (and the matches copied again,
+    // so that every read of this frame sees one state), then, once the local points are picked
+    // without the lock, their copies and the poses the refiner and the trajectory use.
     map::MapReader view = map_.reader(&lock_clock_);
     for (map::PointId pid : frame.points) {
       if (pid != map::kNoPoint) snapshot_.add(view, pid);
     }
     update_local_map(view, frame);
+  }
+  collect_local_points(frame);
+  {
+    map::MapReader view = map_.reader(&lock_clock_);
+    snapshot_.copy_points(view, local_points_);
     for (map::KeyframeId anchor : refiner_.anchor_ids()) snapshot_.add_pose(view, anchor);
     snapshot_.add_pose(view, reference_);
   }
+  snapshot_.index_copies();
   // Matched points count as seen; the local search marks the rest it projects as visible.
   for (std::size_t i = 0; i < frame.points.size(); ++i) {
     if (frame.points[i] == map::kNoPoint) continue;
@@ -511,6 +547,9 @@ bool Tracker::relocalize(Frame& frame) {
     if (optimize_pose(frame) < 10) continue;
     // Recover more matches by projection before accepting.
     update_local_map(view, frame);
+    collect_local_points(frame);
+    snapshot_.copy_points(view, local_points_);
+    snapshot_.index_copies();
     match_local_points(snapshot_, frame, local_points_, 2.0 * config_.local_search_factor,
                        MatchContext{camera_, pyramid_, depth_.bf}, counters_);
     if (optimize_pose(frame) >= config_.min_inliers_after_reloc) {
@@ -564,8 +603,9 @@ bool Tracker::need_keyframe(const map::MapReader& view, const Frame& frame,
   return policy_->decide(c);
 }
 
-map::KeyframeId Tracker::create_keyframe(map::MapView& view, Frame& frame) {
-  map::Keyframe kf;
+Tracker::KeyframeDraft Tracker::draft_keyframe(const Frame& frame) const {
+  KeyframeDraft d;
+  map::Keyframe& kf = d.keyframe;
   kf.frame_index = frame.index;
   kf.stamp = frame.stamp;
   kf.T_cw = frame.T_cw;
@@ -576,17 +616,21 @@ map::KeyframeId Tracker::create_keyframe(map::MapView& view, Frame& frame) {
   for (std::size_t i = 0; i < frame.points.size(); ++i) {
     if (frame.points[i] != map::kNoPoint && !frame.outlier[i]) kf.points[i] = frame.points[i];
   }
-  const map::KeyframeId kid = view.add_keyframe(std::move(kf));
+  d.by_depth.resize(frame.features.size());
+  std::iota(d.by_depth.begin(), d.by_depth.end(), 0);
+  std::sort(d.by_depth.begin(), d.by_depth.end(),
+            [&](std::size_t a, std::size_t b) { return frame.features.depth[a] < frame.features.depth[b]; });
+  return d;
+}
+
+map::KeyframeId Tracker::create_keyframe(map::MapView& view, Frame& frame, KeyframeDraft draft) {
+  const map::KeyframeId kid = view.add_keyframe(std::move(draft.keyframe));
   map::Keyframe* stored = view.keyframe(kid);
 
   // RGB-D: new points straight from depth, closest first; all close ones and at least new_points_min.
-  std::vector<std::size_t> order(frame.features.size());
-  std::iota(order.begin(), order.end(), 0);
-  std::sort(order.begin(), order.end(),
-            [&](std::size_t a, std::size_t b) { return frame.features.depth[a] < frame.features.depth[b]; });
   const geo::SE3 T_wc = frame.T_cw.inverse();
   int created = 0;
-  for (std::size_t i : order) {
+  for (std::size_t i : draft.by_depth) {
     const float d = frame.features.depth[i];
     if (d <= 0) continue;
     if (d > depth_.close_depth && created >= config_.new_points_min) break;
@@ -607,7 +651,6 @@ map::KeyframeId Tracker::create_keyframe(map::MapView& view, Frame& frame) {
   view.update_connections(kid);
   reference_ = kid;
   last_keyframe_frame_ = frame.index;
-  refiner_.set_anchor(kid, frame);
   return kid;
 }
 

@@ -8,6 +8,8 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <unordered_map>
+#include <unordered_set>
 #include <vector>
 
 #include "stillpoint/map/map.hpp"
@@ -124,12 +126,22 @@ class Tracker {
   // The pose guard (PoseGuardConfig). True when the frame jumped: it must not become a keyframe.
   bool guard_pose(Frame& frame, const geo::SE3& predicted_T_cw);
   int optimize_pose(Frame& frame);
-  // Picks the local keyframes and points around the frame's matches and copies the points.
+  // Picks the local keyframes around the frame's matches (and the reference) and copies their point
+  // slots; collect_local_points() then picks the local points from them without the lock.
   void update_local_map(const map::MapReader& view, Frame& frame);
+  void collect_local_points(const Frame& frame);
   void refresh_last_frame(const map::MapReader& view);
   [[nodiscard]] bool need_keyframe(const map::MapReader& view, const Frame& frame,
                                    const MappingStatus& mapping) const;
-  map::KeyframeId create_keyframe(map::MapView& view, Frame& frame);
+  // A keyframe is drafted from the frame without the lock (features, grid, thumbnail, features by
+  // depth), then stored with its new points under a view; the caller makes it the refiner's anchor
+  // after that view (the anchor's image pyramid needs no lock).
+  struct KeyframeDraft {
+    map::Keyframe keyframe;
+    std::vector<std::size_t> by_depth;  // features, closest first
+  };
+  [[nodiscard]] KeyframeDraft draft_keyframe(const Frame& frame) const;
+  map::KeyframeId create_keyframe(map::MapView& view, Frame& frame, KeyframeDraft draft);
 
   map::Map& map_;
   TrackerConfig config_;
@@ -149,6 +161,10 @@ class Tracker {
   std::uint64_t big_changes_seen_ = 0;
   std::vector<map::KeyframeId> local_keyframes_;
   std::vector<map::PointId> local_points_;
+  std::vector<map::PointId> local_slots_;  // the local keyframes' point slots, in keyframe order
+  bool local_slots_fresh_ = false;         // update_local_map() refilled them since the last collect
+  std::unordered_set<map::PointId> seen_;  // collect_local_points()' scratch, kept for its buckets
+  std::unordered_map<map::KeyframeId, int> keyframe_counts_;  // update_local_map()'s scratch, idem
   std::size_t lost_frames_ = 0;
   std::string why_lost_;  // the failed step and its counts, for the log when tracking is lost
   std::size_t relocalizations_ = 0;
