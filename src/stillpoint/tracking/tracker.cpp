@@ -406,13 +406,12 @@ void Tracker::collect_local_points(const Frame& frame) {
 
 bool Tracker::track_local_map(Frame& frame) {
   {
-    // Two short reads: the local keyframes around the frame's matches (and the matches copied again,
-    // so that every read of this frame sees one state), then, once the local points are picked
-    // without the lock, their copies and the poses the refiner and the trajectory use.
+    // Two short reads: the local keyframes around the frame's matches, then, once the local points
+    // are picked without the lock, their copies and the poses the refiner and the trajectory use.
+    // The matches keep the copies made with the last frame or the reference keyframe a moment ago
+    // (not copied twice under the lock): one culled since then still serves this frame's pose and is
+    // skipped at the write-back; one moved by bundle adjustment meanwhile serves at its older place.
     map::MapReader view = map_.reader(&lock_clock_);
-    for (map::PointId pid : frame.points) {
-      if (pid != map::kNoPoint) snapshot_.add(view, pid);
-    }
     update_local_map(view, frame);
   }
   collect_local_points(frame);
