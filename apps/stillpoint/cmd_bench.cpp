@@ -134,7 +134,7 @@ nlohmann::json summarize_row(const std::string& seq, const Variant& v, int rc, c
   }
   nlohmann::json ms;
   for (const char* st : {"frame", "load", "extract", "dynamic", "detector", "track", "track_lock",
-                         "local_map", "ba", "loop"}) {
+                         "track_lock_wait", "local_map", "ba", "loop"}) {
     ms[st] = {{"median", stage(s, st, "median_ms")}, {"p95", stage(s, st, "p95_ms")}};
   }
   row["ms"] = ms;

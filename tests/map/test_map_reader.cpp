@@ -37,9 +37,10 @@ TEST(LockHoldClock, AddsUpTheHoldsOfTheViewsGivenItAndStartsAgainWhenTaken) {
     std::this_thread::sleep_for(std::chrono::milliseconds(2));
   }
   { MapView untimed = map.view(); }
-  const double held = clock.take();
-  EXPECT_GE(held, 4.0);
-  EXPECT_EQ(clock.take(), 0.0);
+  const LockHoldClock::Times t = clock.take();
+  EXPECT_GE(t.held_ms, 4.0);
+  EXPECT_GE(t.waited_ms, 0.0);
+  EXPECT_EQ(clock.take().held_ms, 0.0);
 }
 
 }  // namespace

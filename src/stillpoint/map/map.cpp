@@ -39,15 +39,29 @@ int predict_level(double max_distance, double distance, const ScalePyramid& pyra
   return std::clamp(level, 0, pyramid.levels - 1);
 }
 
-MapReader::MapReader(Map& map, LockHoldClock* clock) : map_(map), lock_(map.mutex_), clock_(clock) {
+namespace {
+
+double ms_since(std::chrono::steady_clock::time_point t) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t).count();
+}
+
+}  // namespace
+
+MapReader::MapReader(Map& map, LockHoldClock* clock)
+    : map_(map),
+      clock_(clock),
+      asked_at_(clock != nullptr ? std::chrono::steady_clock::now()
+                                 : std::chrono::steady_clock::time_point{}),
+      lock_(map.mutex_) {
+  // steady_clock only (no system call) while the lock is held: the timing must not invite preemption.
   if (clock_ != nullptr) locked_at_ = std::chrono::steady_clock::now();
 }
 
 MapReader::~MapReader() {
   // Runs before lock_ is released, so the hold measured ends just before the unlock.
-  if (clock_ != nullptr)
-    clock_->add(
-        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - locked_at_).count());
+  if (clock_ == nullptr) return;
+  clock_->add(
+      {ms_since(locked_at_), std::chrono::duration<double, std::milli>(locked_at_ - asked_at_).count()});
 }
 
 const Keyframe* MapReader::keyframe(KeyframeId id) const {

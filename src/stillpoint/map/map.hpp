@@ -20,22 +20,30 @@ namespace sp::map {
 
 class Map;
 
-// Adds up how long the views given it held the map lock: the tracking thread's lock time per frame
-// (stats.json stages_ms.track_lock). One per thread, never shared.
+// Adds up how long the views given it held the map lock and waited for it (wall time): the tracking
+// thread's lock time per frame (stats.json stages_ms.track_lock, track_lock_wait). One per thread,
+// never shared.
 class LockHoldClock {
  public:
-  void add(double ms) { held_ms_ += ms; }
-  // The time added since the last call; starts again from zero.
-  double take() { return std::exchange(held_ms_, 0.0); }
+  struct Times {
+    double held_ms = 0;    // from taking the lock to releasing it
+    double waited_ms = 0;  // spent waiting to take it
+  };
+  void add(const Times& t) {
+    times_.held_ms += t.held_ms;
+    times_.waited_ms += t.waited_ms;
+  }
+  // The times added since the last call; they start again from zero.
+  Times take() { return std::exchange(times_, Times{}); }
 
  private:
-  double held_ms_ = 0;
+  Times times_;
 };
 
 // Read-only access under the map's lock, for code that only reads.
 class MapReader {
  public:
-  // With a clock, the time from taking the lock to releasing it is added to it.
+  // With a clock, the time waited for the lock and held is added to it.
   explicit MapReader(Map& map, LockHoldClock* clock = nullptr);
   MapReader(const MapReader&) = delete;
   MapReader& operator=(const MapReader&) = delete;
@@ -66,8 +74,10 @@ class MapReader {
   Map& map_;
 
  private:
-  std::unique_lock<std::mutex> lock_;
+  // Declared before lock_: set before the lock is taken.
   LockHoldClock* clock_ = nullptr;
+  std::chrono::steady_clock::time_point asked_at_;
+  std::unique_lock<std::mutex> lock_;
   std::chrono::steady_clock::time_point locked_at_;
 };
 

@@ -71,7 +71,7 @@ void Tracker::start_in_existing_map() {
 TrackOutcome Tracker::track(Frame& frame, const MappingStatus& mapping) {
   lock_clock_.take();
   TrackOutcome out = track_frame(frame, mapping);
-  last_lock_ms_ = lock_clock_.take();  // every view of the frame has ended here
+  last_lock_ = lock_clock_.take();  // every view of the frame has ended here
   return out;
 }
 

@@ -85,8 +85,9 @@ class Tracker {
           map::ScalePyramid pyramid, double fps);
 
   TrackOutcome track(Frame& frame, const MappingStatus& mapping);
-  // Milliseconds the last track() held the map lock, all its views together.
-  [[nodiscard]] double last_lock_ms() const { return last_lock_ms_; }
+  // How long the last track() held the map lock (and waited for it), all its views together.
+  [[nodiscard]] double last_lock_ms() const { return last_lock_.held_ms; }
+  [[nodiscard]] const map::LockHoldClock::Times& last_lock() const { return last_lock_; }
 
   // The map holds a loaded map: frames relocalise in it instead of starting a new map, and count as
   // lost until one does. Call before the first frame.
@@ -183,7 +184,7 @@ class Tracker {
   LocalMapSnapshot snapshot_;      // the map records this frame reads, copied under short readers
   PointCounterUpdates counters_;   // ... and the counters it raises, written back at the end
   map::LockHoldClock lock_clock_;  // every view the tracker takes is timed on it
-  double last_lock_ms_ = 0;
+  map::LockHoldClock::Times last_lock_;
 };
 
 }  // namespace sp::track
