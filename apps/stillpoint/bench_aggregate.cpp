@@ -62,6 +62,11 @@ RunMetrics metrics_from_row(const nlohmann::json& row) {
       const auto ms = number_at(row["ms"]["frame"], "median");
       if (ms && *ms > 0) m.track_ms = ms;
     }
+    // Runs from before the lock was measured have no track_lock (bench writes 0 for a missing stage).
+    if (row.contains("ms") && row["ms"].contains("track_lock")) {
+      const auto ms = number_at(row["ms"]["track_lock"], "median");
+      if (ms && *ms > 0) m.lock_ms = ms;
+    }
   }
   if (row.contains("culling_score") && row["culling_score"].value("true_dynamic_keypoints", 0) > 0) {
     m.cull_precision = number_at(row["culling_score"], "precision");
@@ -117,6 +122,7 @@ std::vector<AggregateRow> aggregate_repeats(const std::vector<RunMetrics>& runs)
     row.lost_frames = median_of(list, [](const RunMetrics& r) { return r.lost_frames; });
     row.fps = median_of(list, [](const RunMetrics& r) { return r.fps; });
     row.track_ms = median_of(list, [](const RunMetrics& r) { return r.track_ms; });
+    row.lock_ms = median_of(list, [](const RunMetrics& r) { return r.lock_ms; });
     row.cull_precision = median_of(list, [](const RunMetrics& r) { return r.cull_precision; });
     row.cull_recall = median_of(list, [](const RunMetrics& r) { return r.cull_recall; });
     out.push_back(std::move(row));
@@ -183,6 +189,7 @@ nlohmann::json to_json(const RunMetrics& m) {
           {"lost_frames", opt(m.lost_frames)},
           {"fps", opt(m.fps)},
           {"track_ms", opt(m.track_ms)},
+          {"lock_ms", opt(m.lock_ms)},
           {"cull_precision", opt(m.cull_precision)},
           {"cull_recall", opt(m.cull_recall)}};
 }
@@ -199,6 +206,7 @@ nlohmann::json to_json(const AggregateRow& r) {
           {"lost_frames_median", opt(r.lost_frames)},
           {"fps_median", opt(r.fps)},
           {"track_ms_median", opt(r.track_ms)},
+          {"lock_ms_median", opt(r.lock_ms)},
           {"cull_precision_median", opt(r.cull_precision)},
           {"cull_recall_median", opt(r.cull_recall)}};
 }

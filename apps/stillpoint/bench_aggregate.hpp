@@ -21,6 +21,7 @@ struct RunMetrics {
   std::optional<double> lost_frames;
   std::optional<double> fps;
   std::optional<double> track_ms;  // tracking thread, median ms per frame
+  std::optional<double> lock_ms;   // ... of which it held the map lock, median ms per frame
   std::optional<double> cull_precision, cull_recall;
 };
 
@@ -31,7 +32,7 @@ struct AggregateRow {
   int runs = 0;    // repeats run
   int failed = 0;  // repeats with a non-zero exit code
   std::optional<double> ate_cm, ate_min_cm, ate_max_cm;
-  std::optional<double> max_error_cm, lost_frames, fps, track_ms, cull_precision, cull_recall;
+  std::optional<double> max_error_cm, lost_frames, fps, track_ms, lock_ms, cull_precision, cull_recall;
 };
 
 // One variant over the sequences of one group ("all" = every sequence).
@@ -54,7 +55,8 @@ struct SummaryRow {
 std::optional<double> median(std::vector<double> values);
 
 // The run metrics of one bench row (the JSON of a run as `bench` writes it: "ate" {rmse, max} in metres,
-// lost_frames, fps, ms.frame.median, culling_score {precision, recall, true_dynamic_keypoints}).
+// lost_frames, fps, ms.frame.median, ms.track_lock.median, culling_score {precision, recall,
+// true_dynamic_keypoints}).
 RunMetrics metrics_from_row(const nlohmann::json& row);
 
 // True for the variant culling with ground-truth masks: named "oracle" (or ending in ":oracle"), or

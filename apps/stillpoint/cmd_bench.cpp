@@ -133,8 +133,8 @@ nlohmann::json summarize_row(const std::string& seq, const Variant& v, int rc, c
     row["rpe_rot_deg"] = s["eval"]["rpe_rot_deg"];
   }
   nlohmann::json ms;
-  for (const char* st :
-       {"frame", "load", "extract", "dynamic", "detector", "track", "local_map", "ba", "loop"}) {
+  for (const char* st : {"frame", "load", "extract", "dynamic", "detector", "track", "track_lock",
+                         "track_lock_wait", "local_map", "ba", "loop"}) {
     ms[st] = {{"median", stage(s, st, "median_ms")}, {"p95", stage(s, st, "p95_ms")}};
   }
   row["ms"] = ms;
@@ -151,13 +151,14 @@ nlohmann::json summarize_row(const std::string& seq, const Variant& v, int rc, c
 void print_table(const nlohmann::json& rows) {
   fmt::print(
       "\n{:<28} {:<24} {:>5} {:>4} {:>4} | {:>7} {:>7} {:>7} | {:>7} {:>6} | {:>6} {:>6} {:>6} {:>6} {:>6} "
-      "{:>6} | {:>6} {:>7} | {:>5} {:>5}\n",
+      "{:>6} {:>6} {:>6} | {:>6} {:>7} | {:>5} {:>5}\n",
       "sequence", "variant", "frames", "lost", "KFs", "ATE", "mean", "median", "RPE-t", "RPE-r", "frame",
-      "p95", "extr", "dyn", "track", "map", "FPS", "RSS MiB", "cullP", "cullR");
+      "p95", "extr", "dyn", "track", "lock", "lock95", "map", "FPS", "RSS MiB", "cullP", "cullR");
   fmt::print(
       "{:<28} {:<24} {:>5} {:>4} {:>4} | {:>7} {:>7} {:>7} | {:>7} {:>6} | {:>6} {:>6} {:>6} {:>6} {:>6} "
-      "{:>6} | {:>6} {:>7} | {:>5} {:>5}\n",
-      "", "", "", "", "", "cm", "cm", "cm", "cm", "deg", "ms", "ms", "ms", "ms", "ms", "ms", "", "", "", "");
+      "{:>6} {:>6} {:>6} | {:>6} {:>7} | {:>5} {:>5}\n",
+      "", "", "", "", "", "cm", "cm", "cm", "cm", "deg", "ms", "ms", "ms", "ms", "ms", "ms", "ms", "ms", "",
+      "", "", "");
   for (const auto& r : rows) {
     const bool has_eval = r.contains("ate");
     auto cm = [&](const char* key, const char* stat) {
@@ -172,19 +173,21 @@ void print_table(const nlohmann::json& rows) {
     }
     fmt::print(
         "{:<28} {:<24} {:>5} {:>4} {:>4} | {:>7} {:>7} {:>7} | {:>7} {:>6} | {:>6.1f} {:>6.1f} {:>6.1f} "
-        "{:>6.1f} {:>6.1f} {:>6.1f} | {:>6.1f} {:>7.0f} | {:>5} {:>5}{}\n",
+        "{:>6.1f} {:>6.1f} {:>6.2f} {:>6.2f} {:>6.1f} | {:>6.1f} {:>7.0f} | {:>5} {:>5}{}\n",
         r.value("sequence", ""), r.value("variant", ""), r.value("frames", 0), r.value("lost_frames", 0),
         r.value("keyframes", 0), cm("ate", "rmse"), cm("ate", "mean"), cm("ate", "median"),
         cm("rpe_trans", "rmse"),
         has_eval ? fmt::format("{:.2f}", r["rpe_rot_deg"].value("rmse", 0.0)) : std::string("-"),
         med("frame"), ms["frame"].value("p95", 0.0), med("extract"), med("dynamic"), med("track"),
-        med("local_map"), r.value("fps", 0.0), r.value("peak_rss_mib", 0.0), cull_p, cull_r,
+        med("track_lock"), ms["track_lock"].value("p95", 0.0), med("local_map"), r.value("fps", 0.0),
+        r.value("peak_rss_mib", 0.0), cull_p, cull_r,
         r.value("exit_code", 0) == 0 ? "" : fmt::format("  (exit {})", r.value("exit_code", 0)));
   }
   fmt::print(
       "\nATE/RPE as the TUM benchmark defines them (SE(3) alignment, RPE delta 1 s). ms = median per frame "
       "of\n"
-      "the tracking thread (frame) and its steps; map = local mapping per keyframe (own thread).\n");
+      "the tracking thread (frame) and its steps; lock/lock95 = median/p95 per frame of the time tracking\n"
+      "held the map lock; map = local mapping per keyframe (own thread).\n");
 }
 
 // Loop closing (the paper's Table VIII and more): per run, what the detector cost and what it closed,
@@ -442,22 +445,24 @@ void print_aggregate_table(const std::vector<bench::AggregateRow>& rows, int rep
   std::size_t w = 28;
   for (const auto& r : rows) w = std::max(w, r.sequence.size());
   fmt::print("\nMedians over {} repeat(s) per sequence and variant\n", repeats);
-  fmt::print("{:<{}} {:<24} {:>4} | {:>7} {:>15} {:>7} | {:>6} {:>6} {:>7} | {:>5} {:>5}\n", "sequence", w,
-             "variant", "runs", "ATE", "ATE min-max", "maxErr", "lost", "FPS", "trk ms", "cullP", "cullR");
-  fmt::print("{:<{}} {:<24} {:>4} | {:>7} {:>15} {:>7} | {:>6} {:>6} {:>7} | {:>5} {:>5}\n", "", w, "", "",
-             "cm", "cm", "cm", "", "", "median", "", "");
+  fmt::print("{:<{}} {:<24} {:>4} | {:>7} {:>15} {:>7} | {:>6} {:>6} {:>7} {:>7} | {:>5} {:>5}\n", "sequence",
+             w, "variant", "runs", "ATE", "ATE min-max", "maxErr", "lost", "FPS", "trk ms", "lock ms",
+             "cullP", "cullR");
+  fmt::print("{:<{}} {:<24} {:>4} | {:>7} {:>15} {:>7} | {:>6} {:>6} {:>7} {:>7} | {:>5} {:>5}\n", "", w, "",
+             "", "cm", "cm", "cm", "", "", "median", "median", "", "");
   for (const auto& r : rows) {
     const std::string spread =
         r.ate_min_cm ? fmt::format("{:.2f}-{:.2f}", *r.ate_min_cm, *r.ate_max_cm) : std::string("-");
-    fmt::print("{:<{}} {:<24} {:>4} | {:>7} {:>15} {:>7} | {:>6} {:>6} {:>7} | {:>5} {:>5}{}\n", r.sequence,
-               w, r.variant, r.runs, fmt_opt(r.ate_cm), spread, fmt_opt(r.max_error_cm),
+    fmt::print("{:<{}} {:<24} {:>4} | {:>7} {:>15} {:>7} | {:>6} {:>6} {:>7} {:>7} | {:>5} {:>5}{}\n",
+               r.sequence, w, r.variant, r.runs, fmt_opt(r.ate_cm), spread, fmt_opt(r.max_error_cm),
                fmt_opt(r.lost_frames, "{:.0f}"), fmt_opt(r.fps, "{:.1f}"), fmt_opt(r.track_ms, "{:.1f}"),
-               fmt_opt(r.cull_precision), fmt_opt(r.cull_recall),
+               fmt_opt(r.lock_ms, "{:.2f}"), fmt_opt(r.cull_precision), fmt_opt(r.cull_recall),
                r.failed > 0 ? fmt::format("  ({} failed)", r.failed) : std::string());
   }
   fmt::print(
       "ATE = RMSE after SE(3) alignment; maxErr = largest per-frame translation error after the same "
-      "alignment;\ncullP/cullR = culling precision/recall against the ground-truth masks (stats.json "
+      "alignment;\nlock ms = median per frame of the time the tracking thread held the map "
+      "lock;\ncullP/cullR = culling precision/recall against the ground-truth masks (stats.json "
       "culling_score).\n");
 }
 

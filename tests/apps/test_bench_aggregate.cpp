@@ -165,7 +165,7 @@ TEST(BenchAggregate, MetricsFromABenchRow) {
     "sequence": "tune/room101", "variant": "default", "repeat": 2, "exit_code": 0,
     "frames": 50, "lost_frames": 3, "fps": 17.5,
     "ate": {"rmse": 0.0123, "max": 0.045},
-    "ms": {"frame": {"median": 21.5, "p95": 30.0}},
+    "ms": {"frame": {"median": 21.5, "p95": 30.0}, "track_lock": {"median": 0.75, "p95": 1.5}},
     "culling_score": {"true_dynamic_keypoints": 100, "precision": 0.8, "recall": 0.6}})");
   const RunMetrics m = metrics_from_row(row);
   EXPECT_EQ(m.sequence, "tune/room101");
@@ -175,6 +175,7 @@ TEST(BenchAggregate, MetricsFromABenchRow) {
   EXPECT_DOUBLE_EQ(*m.lost_frames, 3.0);
   EXPECT_DOUBLE_EQ(*m.fps, 17.5);
   EXPECT_DOUBLE_EQ(*m.track_ms, 21.5);
+  EXPECT_DOUBLE_EQ(*m.lock_ms, 0.75);
   EXPECT_DOUBLE_EQ(*m.cull_precision, 0.8);
   EXPECT_DOUBLE_EQ(*m.cull_recall, 0.6);
 
@@ -186,6 +187,7 @@ TEST(BenchAggregate, MetricsFromABenchRow) {
   EXPECT_FALSE(crashed.ate_cm.has_value());
   EXPECT_FALSE(crashed.lost_frames.has_value());
   EXPECT_FALSE(crashed.fps.has_value());
+  EXPECT_FALSE(crashed.lock_ms.has_value());
   EXPECT_FALSE(crashed.cull_precision.has_value());
 }
 

@@ -148,6 +148,16 @@ TEST_F(EndToEnd, ThreadedRunFinishesAndTracksEveryFrame) {
   EXPECT_EQ(r.stats["tracked_frames"].get<int>(), 150);
   ASSERT_TRUE(r.ate_rmse.has_value());
   EXPECT_LT(*r.ate_rmse, 0.02);
+  // The map lock time of the tracking thread, per frame: part of each frame's tracking time, so its
+  // median, p95 and max are no larger than the tracking time's.
+  const auto& stages = r.stats["stages_ms"];
+  ASSERT_TRUE(stages.contains("track_lock"));
+  const auto& lock = stages["track_lock"];
+  const auto& track = stages["track"];
+  EXPECT_EQ(lock["count"].get<int>(), 150);
+  EXPECT_GT(lock["median_ms"].get<double>(), 0.0);
+  for (const char* k : {"median_ms", "p95_ms", "max_ms"})
+    EXPECT_LE(lock[k].get<double>(), track[k].get<double>()) << k;
 }
 
 }  // namespace

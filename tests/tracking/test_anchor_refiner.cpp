@@ -77,6 +77,19 @@ class AnchorRefinerTest : public ::testing::Test {
     return f;
   }
 
+  // What the tracker copies for the refiner under its short read: the frame's points and the anchors'
+  // poses. The refiner itself never takes the map lock.
+  LocalMapSnapshot snapshot(const AnchorRefiner& refiner, const Frame& f) {
+    LocalMapSnapshot s;
+    s.reset(refiner.anchor_ids());
+    map::MapReader view = map_.reader();
+    for (map::PointId pid : f.points) {
+      if (pid != map::kNoPoint) s.add(view, pid);
+    }
+    for (map::KeyframeId a : refiner.anchor_ids()) s.add_pose(view, a);
+    return s;
+  }
+
   // The current frame: the texture moved by kShift, detections rounded to whole pixels, every feature
   // matched to its map point. The pose is the anchor's (the refiner only checks its geometry rules).
   Frame current(const cv::Mat& image, const geo::SE3& T_cw = geo::SE3()) const {
@@ -104,8 +117,7 @@ TEST_F(AnchorRefinerTest, RecoversTheSubPixelShiftOfEveryFeature) {
   Frame f = current(shifted(anchor_image_, kShift));
   const std::vector<float> u_right_before = f.features.u_right;
   std::vector<bool> refined;
-  map::MapView view = map_.view();
-  const int moved = refiner.refine(view, f, refined);
+  const int moved = refiner.refine(snapshot(refiner, f), f, refined);
   ASSERT_EQ(moved, static_cast<int>(anchor_pts_.size()));
   double sum_sq_before = 0, sum_sq_after = 0;
   for (std::size_t i = 0; i < anchor_pts_.size(); ++i) {
@@ -136,8 +148,7 @@ TEST_F(AnchorRefinerTest, AnOccludedPatchKeepsItsDetection) {
   Frame f = current(image);
   const std::vector<cv::KeyPoint> detected = f.features.keypoints;
   std::vector<bool> refined;
-  map::MapView view = map_.view();
-  refiner.refine(view, f, refined);
+  refiner.refine(snapshot(refiner, f), f, refined);
   int covered = 0;
   for (std::size_t i = 0; i < anchor_pts_.size(); ++i) {
     if (anchor_pts_[i].x > cam_.width / 3.0 - 12) {
@@ -155,21 +166,20 @@ TEST_F(AnchorRefinerTest, NoAlignmentAfterARollOrForSuspectsOrOutliers) {
   AnchorRefiner refiner({}, cam_, map::ScalePyramid::make(8, 1.2));
   refiner.set_anchor(anchor_id_, anchor_frame_);
   std::vector<bool> refined;
-  map::MapView view = map_.view();
   {
     // 10 deg about the optical axis: a translation-only patch alignment is not valid.
     const geo::SE3 rolled(
         Eigen::Quaterniond(Eigen::AngleAxisd(10.0 * M_PI / 180.0, Eigen::Vector3d::UnitZ())),
         Eigen::Vector3d::Zero());
     Frame f = current(shifted(anchor_image_, kShift), rolled);
-    EXPECT_EQ(refiner.refine(view, f, refined), 0);
+    EXPECT_EQ(refiner.refine(snapshot(refiner, f), f, refined), 0);
   }
   {
     Frame f = current(shifted(anchor_image_, kShift));
     f.suspect.assign(f.features.size(), false);
     f.suspect[0] = true;  // near a detected person
     f.outlier[1] = true;  // rejected by the pose optimisation
-    const int moved = refiner.refine(view, f, refined);
+    const int moved = refiner.refine(snapshot(refiner, f), f, refined);
     EXPECT_EQ(moved, static_cast<int>(anchor_pts_.size()) - 2);
     EXPECT_FALSE(refined[0]);
     EXPECT_FALSE(refined[1]);
@@ -178,7 +188,7 @@ TEST_F(AnchorRefinerTest, NoAlignmentAfterARollOrForSuspectsOrOutliers) {
   {
     // The camera moved 30 cm closer: every point's depth changed by 15 %, beyond max_scale_change.
     Frame f = current(shifted(anchor_image_, kShift), geo::SE3(Eigen::Quaterniond::Identity(), {0, 0, -0.3}));
-    EXPECT_EQ(refiner.refine(view, f, refined), 0);
+    EXPECT_EQ(refiner.refine(snapshot(refiner, f), f, refined), 0);
   }
 }
 
@@ -190,8 +200,7 @@ TEST_F(AnchorRefinerTest, DisabledOrWithoutAnchorItDoesNothing) {
   EXPECT_EQ(refiner.anchors(), 0u);
   Frame f = current(shifted(anchor_image_, kShift));
   std::vector<bool> refined;
-  map::MapView view = map_.view();
-  EXPECT_EQ(refiner.refine(view, f, refined), 0);
+  EXPECT_EQ(refiner.refine(snapshot(refiner, f), f, refined), 0);
 }
 
 TEST(AnchorRefinerConfig, KeysAreReadAndRangeChecked) {

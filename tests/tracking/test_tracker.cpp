@@ -4,6 +4,8 @@
 // relocalisation. Exact data, so the bounds are the solver's tolerance, far below a pixel's worth.
 #include <gtest/gtest.h>
 
+#include <chrono>
+
 #include "../support/synthetic_map.hpp"
 #include "stillpoint/tracking/tracker.hpp"
 
@@ -116,6 +118,20 @@ TEST_F(TrackerTest, ASuddenStopIsTrackedAtTheTruePose) {
     const auto T_wc = written(*t, i);
     ASSERT_TRUE(T_wc.has_value());
     EXPECT_LT(pose_deviation(T_wc->inverse(), truth(i)).translation_m, 1e-3) << "frame " << i;
+  }
+}
+
+TEST_F(TrackerTest, ReportsHowLongEachFrameHeldTheMapLock) {
+  auto t = make_tracker();
+  for (std::size_t i = 0; i < 10; ++i) {
+    Frame f = make_frame(scene_, path_pose(i), i, cam_, depth_.bf);
+    const auto start = std::chrono::steady_clock::now();
+    ASSERT_EQ(t->track(f, {}).state, TrackingState::Ok) << "frame " << i;
+    const double wall_ms =
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+    // Every frame takes the lock at least once, and never for longer than the call took.
+    EXPECT_GT(t->last_lock_ms(), 0.0) << "frame " << i;
+    EXPECT_LE(t->last_lock_ms(), wall_ms) << "frame " << i;
   }
 }
 

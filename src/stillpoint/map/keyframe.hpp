@@ -40,6 +40,10 @@ struct Keyframe {
   [[nodiscard]] Eigen::Vector3d camera_center() const { return T_cw.inverse().translation(); }
 };
 
+// Pyramid level at which a point with scale-invariance distance `max_distance` is expected to be
+// detected from `distance` away.
+int predict_level(double max_distance, double distance, const ScalePyramid& pyramid);
+
 struct MapPoint {
   PointId id = kNoPoint;
   Eigen::Vector3d position = Eigen::Vector3d::Zero();

@@ -2,40 +2,94 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include "stillpoint/common/error.hpp"
 #include "stillpoint/features/descriptor.hpp"
 
 namespace sp::map {
 
+namespace {
+
+// MapReader::weighted_observations, stopping once it reaches `enough`.
+int weighted_observations_upto(const std::unordered_map<KeyframeId, Keyframe>& keyframes, const MapPoint& p,
+                               int enough) {
+  int n = 0;
+  for (const auto& [kid, feature] : p.observations) {
+    if (n >= enough) break;
+    const auto kit = keyframes.find(kid);
+    if (kit == keyframes.end()) continue;
+    const auto& u_right = kit->second.features.u_right;
+    const auto f = static_cast<std::size_t>(feature);
+    n += f < u_right.size() && u_right[f] >= 0 ? 2 : 1;
+  }
+  return n;
+}
+
+}  // namespace
+
 int MapPoint::predict_level(double distance, const ScalePyramid& pyramid) const {
+  return map::predict_level(max_distance, distance, pyramid);
+}
+
+int predict_level(double max_distance, double distance, const ScalePyramid& pyramid) {
   if (distance <= 0 || max_distance <= 0) return 0;
   const double ratio = max_distance / distance;
   const int level = static_cast<int>(std::ceil(std::log(ratio) / std::log(pyramid.scale_factor)));
   return std::clamp(level, 0, pyramid.levels - 1);
 }
 
-MapView::MapView(Map& map) : map_(map), lock_(map.mutex_) {}
+namespace {
 
-Keyframe* MapView::keyframe(KeyframeId id) {
+double ms_since(std::chrono::steady_clock::time_point t) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t).count();
+}
+
+}  // namespace
+
+MapReader::MapReader(Map& map, LockHoldClock* clock)
+    : map_(map),
+      clock_(clock),
+      asked_at_(clock != nullptr ? std::chrono::steady_clock::now()
+                                 : std::chrono::steady_clock::time_point{}),
+      lock_(map.mutex_) {
+  // steady_clock only (no system call) while the lock is held: the timing must not invite preemption.
+  if (clock_ != nullptr) locked_at_ = std::chrono::steady_clock::now();
+}
+
+MapReader::~MapReader() {
+  // Runs before lock_ is released, so the hold measured ends just before the unlock.
+  if (clock_ == nullptr) return;
+  clock_->add(
+      {ms_since(locked_at_), std::chrono::duration<double, std::milli>(locked_at_ - asked_at_).count()});
+}
+
+const Keyframe* MapReader::keyframe(KeyframeId id) const {
   auto it = map_.keyframes_.find(id);
   return it == map_.keyframes_.end() ? nullptr : &it->second;
 }
 
-MapPoint* MapView::point(PointId id) {
+const MapPoint* MapReader::point(PointId id) const {
   auto it = map_.points_.find(id);
   return it == map_.points_.end() ? nullptr : &it->second;
 }
 
-MapPoint* MapView::live_point(PointId id) {
+const MapPoint* MapReader::live_point(PointId id) const {
   for (int hops = 0; hops < 8 && id != kNoPoint; ++hops) {
-    MapPoint* p = point(id);
+    const MapPoint* p = point(id);
     if (p == nullptr) return nullptr;
     if (!p->bad) return p;
     id = p->replaced_by;
   }
   return nullptr;
 }
+
+// The records are not const (the map owns them mutably); a MapView may hand them out for writing.
+Keyframe* MapView::keyframe(KeyframeId id) { return const_cast<Keyframe*>(MapReader::keyframe(id)); }
+
+MapPoint* MapView::point(PointId id) { return const_cast<MapPoint*>(MapReader::point(id)); }
+
+MapPoint* MapView::live_point(PointId id) { return const_cast<MapPoint*>(MapReader::live_point(id)); }
 
 KeyframeId MapView::add_keyframe(Keyframe kf) {
   kf.id = map_.next_keyframe_id_++;
@@ -180,14 +234,18 @@ void MapView::update_point_normal_and_depth(PointId pid, const ScalePyramid& pyr
 void MapView::update_connections(KeyframeId kid, int min_weight) {
   Keyframe* kf = keyframe(kid);
   if (kf == nullptr || kf->bad) return;
-  std::map<KeyframeId, int> counter;
+  // Counted in a hash map, then visited by increasing id (as a std::map would, at a fraction of the
+  // cost: the tracker runs this under its write-back view).
+  std::unordered_map<KeyframeId, int> counts;
   for (PointId pid : kf->points) {
     const MapPoint* p = pid == kNoPoint ? nullptr : point(pid);
     if (p == nullptr || p->bad) continue;
     for (const auto& [other, feature] : p->observations) {
-      if (other != kid) ++counter[other];
+      if (other != kid) ++counts[other];
     }
   }
+  std::vector<std::pair<KeyframeId, int>> counter(counts.begin(), counts.end());
+  std::sort(counter.begin(), counter.end());
   // Drop old back edges, then add the new ones.
   for (const auto& [other, w] : kf->covisibility) {
     if (Keyframe* o = keyframe(other)) o->covisibility.erase(kid);
@@ -218,7 +276,7 @@ void MapView::update_connections(KeyframeId kid, int min_weight) {
   }
 }
 
-std::vector<KeyframeId> MapView::best_covisibles(KeyframeId kid, std::size_t n) const {
+std::vector<KeyframeId> MapReader::best_covisibles(KeyframeId kid, std::size_t n) const {
   const auto it = map_.keyframes_.find(kid);
   if (it == map_.keyframes_.end()) return {};
   std::vector<std::pair<int, KeyframeId>> v;
@@ -232,7 +290,7 @@ std::vector<KeyframeId> MapView::best_covisibles(KeyframeId kid, std::size_t n) 
   return out;
 }
 
-std::vector<KeyframeId> MapView::covisibles_with_weight(KeyframeId kid, int min_weight) const {
+std::vector<KeyframeId> MapReader::covisibles_with_weight(KeyframeId kid, int min_weight) const {
   std::vector<KeyframeId> out;
   for (KeyframeId o : best_covisibles(kid, std::numeric_limits<std::size_t>::max())) {
     if (map_.keyframes_.at(kid).covisibility.at(o) >= min_weight) out.push_back(o);
@@ -240,7 +298,7 @@ std::vector<KeyframeId> MapView::covisibles_with_weight(KeyframeId kid, int min_
   return out;
 }
 
-int MapView::tracked_points(KeyframeId kid, int min_observations) const {
+int MapReader::tracked_points(KeyframeId kid, int min_observations) const {
   const auto it = map_.keyframes_.find(kid);
   if (it == map_.keyframes_.end()) return 0;
   int n = 0;
@@ -248,21 +306,14 @@ int MapView::tracked_points(KeyframeId kid, int min_observations) const {
     if (pid == kNoPoint) continue;
     const auto pit = map_.points_.find(pid);
     if (pit == map_.points_.end() || pit->second.bad) continue;
-    if (weighted_observations(pit->second) >= min_observations) ++n;
+    // Only whether it reaches the threshold matters: this runs under the tracker's write-back view.
+    if (weighted_observations_upto(map_.keyframes_, pit->second, min_observations) >= min_observations) ++n;
   }
   return n;
 }
 
-int MapView::weighted_observations(const MapPoint& p) const {
-  int n = 0;
-  for (const auto& [kid, feature] : p.observations) {
-    const auto kit = map_.keyframes_.find(kid);
-    if (kit == map_.keyframes_.end()) continue;
-    const auto& u_right = kit->second.features.u_right;
-    const auto f = static_cast<std::size_t>(feature);
-    n += f < u_right.size() && u_right[f] >= 0 ? 2 : 1;
-  }
-  return n;
+int MapReader::weighted_observations(const MapPoint& p) const {
+  return weighted_observations_upto(map_.keyframes_, p, std::numeric_limits<int>::max());
 }
 
 bool MapView::hold_keyframe(KeyframeId kid) {
@@ -314,10 +365,10 @@ bool MapView::erase_keyframe(KeyframeId kid) {
   return true;
 }
 
-const std::unordered_map<KeyframeId, Keyframe>& MapView::keyframes() const { return map_.keyframes_; }
-const std::unordered_map<PointId, MapPoint>& MapView::points() const { return map_.points_; }
+const std::unordered_map<KeyframeId, Keyframe>& MapReader::keyframes() const { return map_.keyframes_; }
+const std::unordered_map<PointId, MapPoint>& MapReader::points() const { return map_.points_; }
 
-std::vector<KeyframeId> MapView::keyframe_ids_sorted() const {
+std::vector<KeyframeId> MapReader::keyframe_ids_sorted() const {
   std::vector<KeyframeId> ids;
   for (const auto& [id, kf] : map_.keyframes_) {
     if (!kf.bad) ids.push_back(id);
@@ -326,17 +377,17 @@ std::vector<KeyframeId> MapView::keyframe_ids_sorted() const {
   return ids;
 }
 
-std::size_t MapView::live_keyframes() const {
+std::size_t MapReader::live_keyframes() const {
   return static_cast<std::size_t>(std::count_if(map_.keyframes_.begin(), map_.keyframes_.end(),
                                                 [](const auto& kv) { return !kv.second.bad; }));
 }
 
-std::size_t MapView::live_points() const {
+std::size_t MapReader::live_points() const {
   return static_cast<std::size_t>(
       std::count_if(map_.points_.begin(), map_.points_.end(), [](const auto& kv) { return !kv.second.bad; }));
 }
 
-std::pair<KeyframeId, PointId> MapView::next_ids() const {
+std::pair<KeyframeId, PointId> MapReader::next_ids() const {
   return {map_.next_keyframe_id_, map_.next_point_id_};
 }
 

@@ -2,13 +2,16 @@
 // The map: the one shared mutable structure of the system.
 //
 // Lock discipline: the Map is a monitor. Every read or write of keyframes and map points goes
-// through a MapView, which holds the map's single mutex for its lifetime. Stages keep views short:
-// heavy work (feature extraction, detection, the numeric part of bundle adjustment) runs on copies
-// without the lock, and results are written back through a new view. Ids, never pointers, are kept
-// across views; a pointer returned by a view is valid only while that view lives.
+// through a MapReader (reads only) or a MapView (reads and writes), which hold the map's single mutex
+// for their lifetime. Stages keep views short: heavy work (feature extraction, detection, the numeric
+// part of bundle adjustment, the tracker's matching and pose optimisation) runs on copies without the
+// lock, and results are written back through a new view. Ids, never pointers, are kept across views;
+// a pointer returned by a view is valid only while that view lives.
 #include <atomic>
+#include <chrono>
 #include <mutex>
 #include <unordered_map>
+#include <utility>
 #include <vector>
 
 #include "stillpoint/map/keyframe.hpp"
@@ -17,13 +20,77 @@ namespace sp::map {
 
 class Map;
 
-class MapView {
+// Adds up how long the views given it held the map lock and waited for it (wall time): the tracking
+// thread's lock time per frame (stats.json stages_ms.track_lock, track_lock_wait). One per thread,
+// never shared.
+class LockHoldClock {
  public:
-  explicit MapView(Map& map);
+  struct Times {
+    double held_ms = 0;    // from taking the lock to releasing it
+    double waited_ms = 0;  // spent waiting to take it
+  };
+  void add(const Times& t) {
+    times_.held_ms += t.held_ms;
+    times_.waited_ms += t.waited_ms;
+  }
+  // The times added since the last call; they start again from zero.
+  Times take() { return std::exchange(times_, Times{}); }
 
+ private:
+  Times times_;
+};
+
+// Read-only access under the map's lock, for code that only reads.
+class MapReader {
+ public:
+  // With a clock, the time waited for the lock and held is added to it.
+  explicit MapReader(Map& map, LockHoldClock* clock = nullptr);
+  MapReader(const MapReader&) = delete;
+  MapReader& operator=(const MapReader&) = delete;
+  ~MapReader();
+
+  [[nodiscard]] const Keyframe* keyframe(KeyframeId id) const;
+  [[nodiscard]] const MapPoint* point(PointId id) const;
+  // Follows replaced_by links; nullptr when the point is gone or bad.
+  [[nodiscard]] const MapPoint* live_point(PointId id) const;
+
+  [[nodiscard]] std::vector<KeyframeId> best_covisibles(KeyframeId kf, std::size_t n) const;
+  [[nodiscard]] std::vector<KeyframeId> covisibles_with_weight(KeyframeId kf, int min_weight) const;
+  // Points of kf with at least min_observations weighted observations (see weighted_observations).
+  [[nodiscard]] int tracked_points(KeyframeId kf, int min_observations) const;
+  // Observations of p with one counted twice where the keyframe has depth at the feature: a depth
+  // reading is a second view (ORB-SLAM's convention for stereo and RGB-D observations).
+  [[nodiscard]] int weighted_observations(const MapPoint& p) const;
+
+  [[nodiscard]] const std::unordered_map<KeyframeId, Keyframe>& keyframes() const;
+  [[nodiscard]] const std::unordered_map<PointId, MapPoint>& points() const;
+  [[nodiscard]] std::vector<KeyframeId> keyframe_ids_sorted() const;
+  [[nodiscard]] std::size_t live_keyframes() const;
+  [[nodiscard]] std::size_t live_points() const;
+  // The ids the next add_keyframe / add_point will hand out (map files save them).
+  [[nodiscard]] std::pair<KeyframeId, PointId> next_ids() const;
+
+ protected:
+  Map& map_;
+
+ private:
+  // Declared before lock_: set before the lock is taken.
+  LockHoldClock* clock_ = nullptr;
+  std::chrono::steady_clock::time_point asked_at_;
+  std::unique_lock<std::mutex> lock_;
+  std::chrono::steady_clock::time_point locked_at_;
+};
+
+// Reads and writes under the map's lock.
+class MapView : public MapReader {
+ public:
+  explicit MapView(Map& map, LockHoldClock* clock = nullptr) : MapReader(map, clock) {}
+
+  using MapReader::keyframe;
+  using MapReader::live_point;
+  using MapReader::point;
   [[nodiscard]] Keyframe* keyframe(KeyframeId id);
   [[nodiscard]] MapPoint* point(PointId id);
-  // Follows replaced_by links; nullptr when the point is gone or bad.
   [[nodiscard]] MapPoint* live_point(PointId id);
 
   KeyframeId add_keyframe(Keyframe kf);  // assigns the id; observations of kf.points are added
@@ -47,21 +114,6 @@ class MapView {
   // Recomputes kf's covisibility edges (and its neighbours' back edges) and its spanning-tree parent.
   void update_connections(KeyframeId kf, int min_weight = 15);
 
-  [[nodiscard]] std::vector<KeyframeId> best_covisibles(KeyframeId kf, std::size_t n) const;
-  [[nodiscard]] std::vector<KeyframeId> covisibles_with_weight(KeyframeId kf, int min_weight) const;
-  // Points of kf with at least min_observations weighted observations (see weighted_observations).
-  [[nodiscard]] int tracked_points(KeyframeId kf, int min_observations) const;
-  // Observations of p with one counted twice where the keyframe has depth at the feature: a depth
-  // reading is a second view (ORB-SLAM's convention for stereo and RGB-D observations).
-  [[nodiscard]] int weighted_observations(const MapPoint& p) const;
-
-  [[nodiscard]] const std::unordered_map<KeyframeId, Keyframe>& keyframes() const;
-  [[nodiscard]] const std::unordered_map<PointId, MapPoint>& points() const;
-  [[nodiscard]] std::vector<KeyframeId> keyframe_ids_sorted() const;
-  [[nodiscard]] std::size_t live_keyframes() const;
-  [[nodiscard]] std::size_t live_points() const;
-  // The ids the next add_keyframe / add_point will hand out (map files save them).
-  [[nodiscard]] std::pair<KeyframeId, PointId> next_ids() const;
   // Frees what bad records hold once they went bad before keyframe id `retired_before`: map points
   // are dropped (ids still held elsewhere then resolve to nullptr, as for any erased point) and culled
   // keyframes shrink to their pose and spanning-tree link, which the trajectory still follows.
@@ -74,10 +126,6 @@ class MapView {
   // cross-references. Throws sp::Error when the map is not empty or an id is 0, repeated or >= its counter.
   void restore(std::vector<Keyframe> keyframes, std::vector<MapPoint> points, KeyframeId next_keyframe_id,
                PointId next_point_id);
-
- private:
-  Map& map_;
-  std::unique_lock<std::mutex> lock_;
 };
 
 class Map {
@@ -86,12 +134,14 @@ class Map {
   Map(const Map&) = delete;
   Map& operator=(const Map&) = delete;
 
-  [[nodiscard]] MapView view() { return MapView(*this); }
+  [[nodiscard]] MapView view(LockHoldClock* clock = nullptr) { return MapView(*this, clock); }
+  [[nodiscard]] MapReader reader(LockHoldClock* clock = nullptr) { return MapReader(*this, clock); }
   // Incremented after a loop correction so the tracker refreshes its motion model and last frame.
   [[nodiscard]] std::uint64_t big_change_count() const { return big_changes_.load(); }
   void notify_big_change() { ++big_changes_; }
 
  private:
+  friend class MapReader;
   friend class MapView;
   std::mutex mutex_;
   std::unordered_map<KeyframeId, Keyframe> keyframes_;

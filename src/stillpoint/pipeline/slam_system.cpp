@@ -331,6 +331,8 @@ FrameReport SlamSystem::process(const io::FrameData& data) {
   const track::MappingStatus mapping{mapping_stage_->idle(), mapping_stage_->queued()};
   const track::TrackOutcome outcome = tracker_.track(frame, mapping);
   times_.add("track", watch.elapsed_ms());
+  times_.add("track_lock", tracker_.last_lock().held_ms);
+  times_.add("track_lock_wait", tracker_.last_lock().waited_ms);
   spdlog::debug("frame {}: {} features, {} culled{}, {} tracked inliers, {}{}", data.index,
                 frame.features.size(), frame.culled,
                 culled.result.ego_motion_rejected ? " (motion-check camera fit rejected)" : "",

@@ -47,7 +47,13 @@ void AnchorRefiner::set_anchor(map::KeyframeId id, const Frame& frame) {
   for (std::size_t i = 0; i < frame.features.size(); ++i) a.raw[i] = raw(frame.features.keypoints[i].pt);
 }
 
-int AnchorRefiner::refine(map::MapView& view, Frame& frame, std::vector<bool>& refined) {
+std::vector<map::KeyframeId> AnchorRefiner::anchor_ids() const {
+  std::vector<map::KeyframeId> ids;
+  for (const Anchor& a : anchors_) ids.push_back(a.id);
+  return ids;
+}
+
+int AnchorRefiner::refine(const LocalMapSnapshot& map, Frame& frame, std::vector<bool>& refined) {
   refined.assign(frame.features.size(), false);
   if (anchors_.empty() || frame.gray.empty() || !frame.has_pose) return 0;
   ++stats_.frames;
@@ -58,7 +64,7 @@ int AnchorRefiner::refine(map::MapView& view, Frame& frame, std::vector<bool>& r
   std::vector<bool> usable(anchors_.size(), false);
   std::vector<Eigen::Vector3d> centers(anchors_.size());
   for (std::size_t a = 0; a < anchors_.size(); ++a) {
-    const map::Keyframe* kf = view.keyframe(anchors_[a].id);
+    const LocalMapSnapshot::Pose* kf = map.pose(anchors_[a].id);
     if (kf == nullptr || kf->bad) continue;
     anchors_[a].T_cw = kf->T_cw;  // bundle adjustment may have moved it
     const Eigen::Matrix3d R_rel = frame.T_cw.rotation() * kf->T_cw.rotation().transpose();
@@ -75,7 +81,7 @@ int AnchorRefiner::refine(map::MapView& view, Frame& frame, std::vector<bool>& r
   for (std::size_t i = 0; i < frame.points.size(); ++i) {
     if (frame.points[i] == map::kNoPoint || frame.outlier[i]) continue;
     if (config_.skip_suspect && i < frame.suspect.size() && frame.suspect[i]) continue;
-    const map::MapPoint* p = view.live_point(frame.points[i]);
+    const LocalMapSnapshot::Point* p = map.live_point(frame.points[i]);
     if (p == nullptr) continue;
     const double z_now = (frame.T_cw * p->position).z();
     if (z_now <= 0) continue;
@@ -83,14 +89,12 @@ int AnchorRefiner::refine(map::MapView& view, Frame& frame, std::vector<bool>& r
     for (std::size_t a = anchors_.size(); a-- > 0;) {
       if (!usable[a]) continue;
       const Anchor& anchor = anchors_[a];
-      const auto obs = p->observations.find(anchor.id);
-      if (obs == p->observations.end() || obs->second < 0 ||
-          static_cast<std::size_t>(obs->second) >= anchor.raw.size())
-        continue;
+      const int feature = map.anchor_feature(*p, anchor.id);
+      if (feature < 0 || static_cast<std::size_t>(feature) >= anchor.raw.size()) continue;
       const double z_anchor = (anchor.T_cw * p->position).z();
       if (z_anchor <= 0 || std::abs(z_anchor / z_now - 1.0) > config_.max_scale_change) continue;
       if ((centers[a] - p->position).normalized().dot(ray_now) < max_view_cos) continue;
-      jobs[a].from.push_back(anchor.raw[static_cast<std::size_t>(obs->second)]);
+      jobs[a].from.push_back(anchor.raw[static_cast<std::size_t>(feature)]);
       jobs[a].to.push_back(raw(frame.features.keypoints[i].pt));
       jobs[a].feature_of.push_back(i);
       break;

@@ -17,6 +17,7 @@
 #include "stillpoint/geometry/lie.hpp"
 #include "stillpoint/map/map.hpp"
 #include "stillpoint/tracking/frame.hpp"
+#include "stillpoint/tracking/local_map_snapshot.hpp"
 
 namespace sp::track {
 
@@ -52,10 +53,14 @@ class AnchorRefiner {
   void reset() { anchors_.clear(); }
   [[nodiscard]] std::size_t anchors() const { return anchors_.size(); }
 
+  // The anchors' keyframe ids, oldest first: a snapshot given to refine() keeps the points'
+  // observations in them and their poses (LocalMapSnapshot::reset, add_pose).
+  [[nodiscard]] std::vector<map::KeyframeId> anchor_ids() const;
+
   // Moves the keypoints (and virtual right coordinates) of the frame's inlier features that the
   // anchor observes to their Lucas-Kanade aligned positions. Marks them in `refined` (per feature).
-  // Returns how many moved.
-  int refine(map::MapView& view, Frame& frame, std::vector<bool>& refined);
+  // Returns how many moved. Reads the map only through the snapshot (no lock held).
+  int refine(const LocalMapSnapshot& map, Frame& frame, std::vector<bool>& refined);
 
   [[nodiscard]] const AnchorRefinerStats& stats() const { return stats_; }
   [[nodiscard]] const AnchorRefinerConfig& config() const { return config_; }

@@ -45,7 +45,7 @@ bool project_point(const geo::SE3& T_cw, const Eigen::Vector3d& p_w, const geo::
   return camera.in_image(uv);
 }
 
-int match_last_frame(map::MapView& view, Frame& cur, const Frame& last, double radius,
+int match_last_frame(const LocalMapSnapshot& map, Frame& cur, const Frame& last, double radius,
                      const MatchContext& ctx) {
   int matches = 0;
   feat::RotationHistogram hist;
@@ -55,7 +55,7 @@ int match_last_frame(map::MapView& view, Frame& cur, const Frame& last, double r
   const bool backward = t_cl.z() < -0.05;
   for (std::size_t i = 0; i < last.points.size(); ++i) {
     if (last.points[i] == map::kNoPoint || last.outlier[i]) continue;
-    const map::MapPoint* p = view.live_point(last.points[i]);
+    const LocalMapSnapshot::Point* p = map.live_point(last.points[i]);
     if (p == nullptr) continue;
     Eigen::Vector2d uv;
     double z = 0;
@@ -76,7 +76,8 @@ int match_last_frame(map::MapView& view, Frame& cur, const Frame& last, double r
       const int c = static_cast<int>(ci);
       if (cur.points[ci] != map::kNoPoint || !right_coordinate_agrees(cur, ci, uv.x(), z, ctx.bf, r))
         continue;
-      const int d = distance(p->descriptor, 0, cur.features.descriptors, c);
+      const int d =
+          feat::hamming_distance(p->descriptor.data(), cur.features.descriptors.ptr<std::uint8_t>(c));
       if (d < best) {
         best = d;
         best_idx = c;
@@ -94,13 +95,14 @@ int match_last_frame(map::MapView& view, Frame& cur, const Frame& last, double r
   return matches;
 }
 
-int match_local_points(map::MapView& view, Frame& cur, const std::vector<map::PointId>& local_points,
-                       double radius_factor, const MatchContext& ctx) {
+int match_local_points(const LocalMapSnapshot& map, Frame& cur, const std::vector<map::PointId>& local_points,
+                       double radius_factor, const MatchContext& ctx, PointCounterUpdates& counters) {
   int matches = 0;
   const Eigen::Vector3d center = cur.camera_center();
   for (std::size_t k = 0; k < local_points.size(); ++k) {
-    map::MapPoint* p = view.point(local_points[k]);
-    if (p == nullptr || p->bad) continue;
+    const LocalMapSnapshot::Point* p = map.live_point(local_points[k]);
+    // A point replaced by another was bad when copied: skipped, not followed (its slot moved on).
+    if (p == nullptr || p->id != local_points[k]) continue;
     Eigen::Vector2d uv;
     double z = 0;
     if (!project_point(cur.T_cw, p->position, ctx.camera, uv, z)) continue;
@@ -108,7 +110,7 @@ int match_local_points(map::MapView& view, Frame& cur, const std::vector<map::Po
     const double dist = ray.norm();
     if (dist < 0.8 * p->min_distance || dist > 1.2 * p->max_distance) continue;
     if (ray.dot(p->normal) / dist < 0.5) continue;  // viewing angle over 60 deg
-    ++p->visible;
+    counters.visible(p->id);
     const int level = p->predict_level(dist, ctx.pyramid);
     // Wider window when the viewing direction is close to the mean one (ORB-SLAM's heuristic).
     const double cos_view = ray.dot(p->normal) / dist;
@@ -120,7 +122,8 @@ int match_local_points(map::MapView& view, Frame& cur, const std::vector<map::Po
       const int c = static_cast<int>(ci);
       if (cur.points[ci] != map::kNoPoint || !right_coordinate_agrees(cur, ci, uv.x(), z, ctx.bf, r))
         continue;
-      const int d = distance(p->descriptor, 0, cur.features.descriptors, c);
+      const int d =
+          feat::hamming_distance(p->descriptor.data(), cur.features.descriptors.ptr<std::uint8_t>(c));
       if (d < best) {
         second = best;
         second_level = best_level;
@@ -141,18 +144,27 @@ int match_local_points(map::MapView& view, Frame& cur, const std::vector<map::Po
   return matches;
 }
 
-int match_keyframe(map::MapView& view, Frame& cur, const map::Keyframe& kf, float ratio) {
+int match_local_points(map::MapView& view, Frame& cur, const std::vector<map::PointId>& local_points,
+                       double radius_factor, const MatchContext& ctx) {
+  LocalMapSnapshot map;
+  map.reset({});
+  for (map::PointId pid : local_points) map.add(view, pid);
+  PointCounterUpdates counters;
+  const int matches = match_local_points(map, cur, local_points, radius_factor, ctx, counters);
+  counters.apply(view);
+  return matches;
+}
+
+int match_keyframe(const LocalMapSnapshot::Keyframe& kf, Frame& cur, float ratio) {
   int matches = 0;
   feat::RotationHistogram hist;
   std::vector<int> best_for_cur(cur.features.size(), 256);
   for (std::size_t i = 0; i < kf.points.size(); ++i) {
-    if (kf.points[i] == map::kNoPoint) continue;
-    const map::MapPoint* p = view.live_point(kf.points[i]);
-    if (p == nullptr) continue;
+    if (kf.points[i] == map::kNoPoint) continue;  // the live point's id
     int best = 256, second = 256, best_idx = -1;
     for (std::size_t c = 0; c < cur.features.size(); ++c) {
-      const int d = distance(kf.features.descriptors, static_cast<int>(i), cur.features.descriptors,
-                             static_cast<int>(c));
+      const int d =
+          distance(kf.descriptors, static_cast<int>(i), cur.features.descriptors, static_cast<int>(c));
       if (d < best) {
         second = best;
         best = d;
@@ -165,9 +177,9 @@ int match_keyframe(map::MapView& view, Frame& cur, const map::Keyframe& kf, floa
     const auto bi = static_cast<std::size_t>(best_idx);
     if (cur.points[bi] != map::kNoPoint && best >= best_for_cur[bi]) continue;
     if (cur.points[bi] == map::kNoPoint) ++matches;
-    cur.points[bi] = p->id;
+    cur.points[bi] = kf.points[i];
     best_for_cur[bi] = best;
-    hist.add(angle_diff(kf.features.keypoints[i].angle, cur.features.keypoints[bi].angle), bi);
+    hist.add(angle_diff(kf.angles[i], cur.features.keypoints[bi].angle), bi);
   }
   apply_rotation_check(cur, hist, matches);
   return matches;

@@ -6,6 +6,7 @@
 #include "stillpoint/geometry/camera.hpp"
 #include "stillpoint/map/map.hpp"
 #include "stillpoint/tracking/frame.hpp"
+#include "stillpoint/tracking/local_map_snapshot.hpp"
 
 namespace sp::track {
 
@@ -20,17 +21,20 @@ inline constexpr int kDescriptorThLow = 50;
 
 // Projects the map points matched in `last` into `cur` (whose T_cw is the prediction) and matches
 // them within `radius` px (scaled by the pyramid level). Returns the number of new matches.
-int match_last_frame(map::MapView& view, Frame& cur, const Frame& last, double radius,
+int match_last_frame(const LocalMapSnapshot& map, Frame& cur, const Frame& last, double radius,
                      const MatchContext& ctx);
 
 // Matches local map points not matched yet; `radius_factor` multiplies the level scale (ORB-SLAM: 3
-// for RGB-D). Points that project into the image count as "visible" (their counter is increased).
+// for RGB-D). Points that project into the image count as "visible": `counters` collects them.
+int match_local_points(const LocalMapSnapshot& map, Frame& cur, const std::vector<map::PointId>& local_points,
+                       double radius_factor, const MatchContext& ctx, PointCounterUpdates& counters);
+// The same under a view the caller holds (loop closing): the visible counters are raised at once.
 int match_local_points(map::MapView& view, Frame& cur, const std::vector<map::PointId>& local_points,
                        double radius_factor, const MatchContext& ctx);
 
 // Matches the frame's descriptors against the keyframe's map points (brute force, ratio test,
 // orientation consistency). Used when the motion model fails and for relocalisation.
-int match_keyframe(map::MapView& view, Frame& cur, const map::Keyframe& kf, float ratio);
+int match_keyframe(const LocalMapSnapshot::Keyframe& kf, Frame& cur, float ratio);
 
 // Projects map points into a keyframe and merges each with the feature it lands on: the feature
 // gains the observation, or, when it already has a point, the better-observed point replaces the

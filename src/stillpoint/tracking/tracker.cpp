@@ -69,19 +69,38 @@ void Tracker::start_in_existing_map() {
 }
 
 TrackOutcome Tracker::track(Frame& frame, const MappingStatus& mapping) {
+  lock_clock_.take();
+  TrackOutcome out = track_frame(frame, mapping);
+  last_lock_ = lock_clock_.take();  // every view of the frame has ended here
+  return out;
+}
+
+TrackOutcome Tracker::track_frame(Frame& frame, const MappingStatus& mapping) {
   TrackOutcome out;
   frame.reset_matches();
   refined_.assign(frame.features.size(), false);
   frame.grid = map::make_feature_grid(frame.features.keypoints, camera_.width, camera_.height);
-  map::MapView view = map_.view();
+  snapshot_.reset(refiner_.anchor_ids());
+  counters_.clear();
 
   if (state_ == TrackingState::NotInitialized) {
-    if (initialize(view, frame)) {
-      state_ = TrackingState::Ok;
-      out.new_keyframe = reference_;
+    {
+      map::MapView view = map_.view(&lock_clock_);
+      if (initialize(view, frame)) {
+        state_ = TrackingState::Ok;
+        out.new_keyframe = reference_;
+        record_pose(frame, view.keyframe(reference_)->T_cw, out);
+      }
     }
+    if (out.new_keyframe != map::kNoKeyframe) refiner_.set_anchor(out.new_keyframe, frame);
   } else {
-    refresh_last_frame(view);
+    std::uint64_t changes_at_read = 0;  // loop corrections seen when the frame's reads began
+    {
+      // A short read: the last frame's points, followed through replacements, and their copies.
+      map::MapReader view = map_.reader(&lock_clock_);
+      refresh_last_frame(view);
+      changes_at_read = map_.big_change_count();
+    }
     bool ok = false;
     bool by_motion = false;
     std::optional<geo::SE3> predicted;
@@ -95,13 +114,13 @@ TrackOutcome Tracker::track(Frame& frame, const MappingStatus& mapping) {
     bool relocalized = false;
     why_lost_.clear();
     if (state_ == TrackingState::Ok) {
-      if (velocity_) ok = by_motion = track_motion_model(view, frame);
-      if (!ok) ok = track_reference_keyframe(view, frame);
+      if (velocity_) ok = by_motion = track_motion_model(frame);
+      if (!ok) ok = track_reference_keyframe(frame);
     } else {
       ++reloc_stats_.attempts;
-      ok = relocalized = relocalize(view, frame);
+      ok = relocalized = relocalize(frame);
     }
-    if (ok) ok = track_local_map(view, frame);
+    if (ok) ok = track_local_map(frame);
     if (ok && relocalized) {
       ++reloc_stats_.poses_found;
       out.relocalized = true;
@@ -121,39 +140,60 @@ TrackOutcome Tracker::track(Frame& frame, const MappingStatus& mapping) {
         ok = false;
       }
     }
-    const bool jumped = ok && predicted && guard_pose(view, frame, *predicted);
-    if (ok) {
-      if (last_frame_.has_pose) velocity_ = frame.T_cw * last_frame_.T_cw.inverse();
-      state_ = TrackingState::Ok;
-      // No keyframe from a pose that is not verified yet.
-      if (verify_left_ == 0 && need_keyframe(view, frame, mapping)) {
-        if (jumped) {
-          ++guard_stats_.keyframes_vetoed;
-        } else {
-          out.new_keyframe = create_keyframe(view, frame);
+    const bool jumped = ok && predicted && guard_pose(frame, *predicted);
+
+    // Write back: counters and the keyframe decision, then (in a second view, once the keyframe is
+    // drafted without the lock) the keyframe. Points or keyframes other stages culled or fused since
+    // the reads are resolved again there (or skipped).
+    bool make_keyframe = false;
+    {
+      map::MapView view = map_.view(&lock_clock_);
+      counters_.apply(view);
+      if (ok) {
+        if (last_frame_.has_pose) velocity_ = frame.T_cw * last_frame_.T_cw.inverse();
+        state_ = TrackingState::Ok;
+        // No keyframe from a pose that is not verified yet.
+        if (verify_left_ == 0 && need_keyframe(view, frame, mapping)) {
+          if (jumped) {
+            ++guard_stats_.keyframes_vetoed;
+          } else {
+            make_keyframe = true;
+          }
         }
+      } else {
+        // Once per loss, not on every failed relocalisation after it.
+        if (state_ == TrackingState::Ok) spdlog::info("frame {} lost:{}", frame.index, why_lost_);
+        state_ = TrackingState::Lost;
+        velocity_.reset();
+        ++lost_frames_;
       }
-    } else {
-      // Once per loss, not on every failed relocalisation after it.
-      if (state_ == TrackingState::Ok) spdlog::info("frame {} lost:{}", frame.index, why_lost_);
-      state_ = TrackingState::Lost;
-      velocity_.reset();
-      ++lost_frames_;
+    }
+    if (make_keyframe) {
+      KeyframeDraft draft = draft_keyframe(frame);
+      map::MapView view = map_.view(&lock_clock_);
+      if (map_.big_change_count() != changes_at_read) {
+        // A loop correction moved the map while this frame was tracked on copies: its pose is in
+        // the old frame, so it must not seed a keyframe and points (the next frame will).
+        spdlog::debug("frame {}: no keyframe, the map was corrected while it was tracked", frame.index);
+      } else {
+        out.new_keyframe = create_keyframe(view, frame, std::move(draft));
+      }
+    }
+    if (out.new_keyframe != map::kNoKeyframe) refiner_.set_anchor(out.new_keyframe, frame);
+    if (state_ == TrackingState::Ok && frame.has_pose) {
+      // Relative to the reference's pose as the frame was tracked against it; a keyframe made just
+      // now has the frame's pose.
+      const LocalMapSnapshot::Pose* ref = snapshot_.pose(reference_);
+      if (out.new_keyframe != map::kNoKeyframe) {
+        record_pose(frame, frame.T_cw, out);
+      } else if (ref != nullptr) {
+        record_pose(frame, ref->T_cw, out);
+      } else {
+        spdlog::warn("frame {}: reference keyframe {} missing, pose not written", frame.index, reference_);
+      }
     }
   }
 
-  if (state_ == TrackingState::Ok && frame.has_pose) {
-    frame.reference = reference_;
-    const map::Keyframe* ref = view.keyframe(reference_);
-    const TrajectoryEntry entry{frame.index, frame.stamp, reference_, frame.T_cw * ref->T_cw.inverse()};
-    if (verify_left_ > 0) {
-      unverified_.push_back(entry);
-      ++lost_frames_;  // until the verification passes
-      out.verifying = true;
-    } else {
-      trajectory_.record(entry);
-    }
-  }
   out.state = out.verifying ? TrackingState::Lost : state_;
   out.inliers = frame.matched();
   // Outliers are forgotten so the next frame does not project them.
@@ -163,6 +203,18 @@ TrackOutcome Tracker::track(Frame& frame, const MappingStatus& mapping) {
   last_frame_ = frame;
   if (state_ != TrackingState::Ok) last_frame_.has_pose = false;
   return out;
+}
+
+void Tracker::record_pose(Frame& frame, const geo::SE3& reference_T_cw, TrackOutcome& out) {
+  frame.reference = reference_;
+  const TrajectoryEntry entry{frame.index, frame.stamp, reference_, frame.T_cw * reference_T_cw.inverse()};
+  if (verify_left_ > 0) {
+    unverified_.push_back(entry);
+    ++lost_frames_;  // until the verification passes
+    out.verifying = true;
+  } else {
+    trajectory_.record(entry);
+  }
 }
 
 bool Tracker::consistent_after_relocalization(const Frame& frame, const geo::SE3& expected_T_cw) const {
@@ -189,16 +241,16 @@ bool Tracker::initialize(map::MapView& view, Frame& frame) {
   if (with_depth < config_.init_min_features) return false;
   frame.T_cw = geo::SE3();
   frame.has_pose = true;
-  reference_ = create_keyframe(view, frame);
+  reference_ = create_keyframe(view, frame, draft_keyframe(frame));
   spdlog::info("map initialised at frame {} with {} points", frame.index, view.live_points());
   return true;
 }
 
-void Tracker::refresh_last_frame(map::MapView& view) {
-  // Points may have been fused by local mapping: follow replacements.
+void Tracker::refresh_last_frame(const map::MapReader& view) {
+  // Points may have been fused by local mapping: follow replacements (and copy them for matching).
   for (auto& pid : last_frame_.points) {
     if (pid == map::kNoPoint) continue;
-    const map::MapPoint* p = view.live_point(pid);
+    const LocalMapSnapshot::Point* p = snapshot_.add(view, pid);
     pid = p == nullptr ? map::kNoPoint : p->id;
   }
   // After a loop correction or BA the last frame moves with its reference keyframe.
@@ -214,47 +266,51 @@ void Tracker::refresh_last_frame(map::MapView& view) {
   }
 }
 
-bool Tracker::track_motion_model(map::MapView& view, Frame& frame) {
+bool Tracker::track_motion_model(Frame& frame) {
   frame.T_cw = *velocity_ * last_frame_.T_cw;
   const MatchContext ctx{camera_, pyramid_, depth_.bf};
-  int matches = match_last_frame(view, frame, last_frame_, config_.motion_search_radius, ctx);
+  int matches = match_last_frame(snapshot_, frame, last_frame_, config_.motion_search_radius, ctx);
   if (matches < config_.min_motion_matches) {
     frame.reset_matches();
-    matches = match_last_frame(view, frame, last_frame_, 2.0 * config_.motion_search_radius, ctx);
+    matches = match_last_frame(snapshot_, frame, last_frame_, 2.0 * config_.motion_search_radius, ctx);
   }
   if (matches < config_.min_motion_matches) {
     why_lost_ += fmt::format(" motion model {} matches;", matches);
     return false;
   }
   frame.has_pose = true;
-  const int inliers = optimize_pose(view, frame);
+  const int inliers = optimize_pose(frame);
   if (inliers < 10) why_lost_ += fmt::format(" motion model {} inliers of {} matches;", inliers, matches);
   return inliers >= 10;
 }
 
-bool Tracker::track_reference_keyframe(map::MapView& view, Frame& frame) {
-  const map::Keyframe* ref = view.keyframe(reference_);
-  if (ref == nullptr) return false;
+bool Tracker::track_reference_keyframe(Frame& frame) {
+  std::optional<LocalMapSnapshot::Keyframe> ref;
+  {
+    map::MapReader view = map_.reader(&lock_clock_);
+    ref = snapshot_.add_keyframe(view, reference_);
+  }
+  if (!ref) return false;
   frame.reset_matches();
-  const int matches = match_keyframe(view, frame, *ref, 0.7f);
+  const int matches = match_keyframe(*ref, frame, 0.7f);
   if (matches < 15) {
     why_lost_ += fmt::format(" reference keyframe {} matches;", matches);
     return false;
   }
   frame.T_cw = last_frame_.has_pose ? last_frame_.T_cw : ref->T_cw;
   frame.has_pose = true;
-  const int inliers = optimize_pose(view, frame);
+  const int inliers = optimize_pose(frame);
   if (inliers < 10)
     why_lost_ += fmt::format(" reference keyframe {} inliers of {} matches;", inliers, matches);
   return inliers >= 10;
 }
 
-int Tracker::optimize_pose(map::MapView& view, Frame& frame) {
+int Tracker::optimize_pose(Frame& frame) {
   std::vector<opt::PoseObservation> obs;
   std::vector<std::size_t> feature_of;
   for (std::size_t i = 0; i < frame.points.size(); ++i) {
     if (frame.points[i] == map::kNoPoint) continue;
-    const map::MapPoint* p = view.live_point(frame.points[i]);
+    const LocalMapSnapshot::Point* p = snapshot_.live_point(frame.points[i]);
     if (p == nullptr) {
       frame.points[i] = map::kNoPoint;
       continue;
@@ -280,16 +336,19 @@ int Tracker::optimize_pose(map::MapView& view, Frame& frame) {
   return inliers;
 }
 
-void Tracker::update_local_map(map::MapView& view, Frame& frame) {
+void Tracker::update_local_map(const map::MapReader& view, Frame& frame) {
   // Local keyframes: those observing the frame's points, their best covisibles, children and parent.
-  std::map<map::KeyframeId, int> counter;
+  // Counted in a hash map (kept for its buckets), then visited by increasing id.
+  keyframe_counts_.clear();
   for (std::size_t i = 0; i < frame.points.size(); ++i) {
     if (frame.points[i] == map::kNoPoint || frame.outlier[i]) continue;
     const map::MapPoint* p = view.live_point(frame.points[i]);
     if (p == nullptr) continue;
-    for (const auto& [kid, feature] : p->observations) ++counter[kid];
+    for (const auto& [kid, feature] : p->observations) ++keyframe_counts_[kid];
   }
-  if (counter.empty()) return;
+  if (keyframe_counts_.empty()) return;
+  std::vector<std::pair<map::KeyframeId, int>> counter(keyframe_counts_.begin(), keyframe_counts_.end());
+  std::sort(counter.begin(), counter.end());
   local_keyframes_.clear();
   std::unordered_set<map::KeyframeId> in_local;
   map::KeyframeId best = map::kNoKeyframe;
@@ -321,23 +380,48 @@ void Tracker::update_local_map(map::MapView& view, Frame& frame) {
   }
   if (best != map::kNoKeyframe) reference_ = best;
   frame.reference = reference_;
-
-  local_points_.clear();
-  std::unordered_set<map::PointId> seen;
-  for (std::size_t i = 0; i < frame.points.size(); ++i) {
-    if (frame.points[i] != map::kNoPoint) seen.insert(frame.points[i]);
-  }
+  // Only the slots are copied here; collect_local_points() picks the points without the lock.
+  local_slots_.clear();
   for (map::KeyframeId kid : local_keyframes_) {
-    for (map::PointId pid : view.keyframe(kid)->points) {
-      if (pid == map::kNoPoint || seen.contains(pid)) continue;
-      seen.insert(pid);
-      local_points_.push_back(pid);
-    }
+    const std::vector<map::PointId>& points = view.keyframe(kid)->points;
+    local_slots_.insert(local_slots_.end(), points.begin(), points.end());
+  }
+  local_slots_fresh_ = true;
+}
+
+void Tracker::collect_local_points(const Frame& frame) {
+  // Without a new local map (no match observed anywhere) the last one is searched again.
+  if (!local_slots_fresh_) return;
+  local_slots_fresh_ = false;
+  local_points_.clear();
+  seen_.clear();
+  for (std::size_t i = 0; i < frame.points.size(); ++i) {
+    if (frame.points[i] != map::kNoPoint) seen_.insert(frame.points[i]);
+  }
+  for (map::PointId pid : local_slots_) {
+    if (pid == map::kNoPoint || !seen_.insert(pid).second) continue;
+    local_points_.push_back(pid);
   }
 }
 
-bool Tracker::track_local_map(map::MapView& view, Frame& frame) {
-  update_local_map(view, frame);
+bool Tracker::track_local_map(Frame& frame) {
+  {
+    // Two short reads: the local keyframes around the frame's matches, then, once the local points
+    // are picked without the lock, their copies and the poses the refiner and the trajectory use.
+    // The matches keep the copies made with the last frame or the reference keyframe a moment ago
+    // (not copied twice under the lock): one culled since then still serves this frame's pose and is
+    // skipped at the write-back; one moved by bundle adjustment meanwhile serves at its older place.
+    map::MapReader view = map_.reader(&lock_clock_);
+    update_local_map(view, frame);
+  }
+  collect_local_points(frame);
+  {
+    map::MapReader view = map_.reader(&lock_clock_);
+    snapshot_.copy_points(view, local_points_);
+    for (map::KeyframeId anchor : refiner_.anchor_ids()) snapshot_.add_pose(view, anchor);
+    snapshot_.add_pose(view, reference_);
+  }
+  snapshot_.index_copies();
   // Matched points count as seen; the local search marks the rest it projects as visible.
   for (std::size_t i = 0; i < frame.points.size(); ++i) {
     if (frame.points[i] == map::kNoPoint) continue;
@@ -346,18 +430,19 @@ bool Tracker::track_local_map(map::MapView& view, Frame& frame) {
       frame.outlier[i] = false;
       continue;
     }
-    if (map::MapPoint* p = view.live_point(frame.points[i])) ++p->visible;
+    if (snapshot_.live_point(frame.points[i]) != nullptr) counters_.visible(frame.points[i]);
   }
   const bool recently_relocalized = frame.index < last_reloc_frame_ + static_cast<std::size_t>(fps_);
   const double factor =
       recently_relocalized ? 2.0 * config_.local_search_factor : config_.local_search_factor;
-  match_local_points(view, frame, local_points_, factor, MatchContext{camera_, pyramid_, depth_.bf});
-  int inliers = optimize_pose(view, frame);
-  if (inliers >= config_.min_inliers && refiner_.refine(view, frame, refined_) > 0)
-    inliers = optimize_pose(view, frame);
+  match_local_points(snapshot_, frame, local_points_, factor, MatchContext{camera_, pyramid_, depth_.bf},
+                     counters_);
+  int inliers = optimize_pose(frame);
+  if (inliers >= config_.min_inliers && refiner_.refine(snapshot_, frame, refined_) > 0)
+    inliers = optimize_pose(frame);
   for (std::size_t i = 0; i < frame.points.size(); ++i) {
     if (frame.points[i] == map::kNoPoint || frame.outlier[i]) continue;
-    if (map::MapPoint* p = view.live_point(frame.points[i])) ++p->found;
+    if (snapshot_.live_point(frame.points[i]) != nullptr) counters_.found(frame.points[i]);
   }
   const int needed =
       recently_relocalized && relocalized_once_ ? config_.min_inliers_after_reloc : config_.min_inliers;
@@ -365,7 +450,7 @@ bool Tracker::track_local_map(map::MapView& view, Frame& frame) {
   return inliers >= needed;
 }
 
-bool Tracker::guard_pose(map::MapView& view, Frame& frame, const geo::SE3& predicted_T_cw) {
+bool Tracker::guard_pose(Frame& frame, const geo::SE3& predicted_T_cw) {
   if (frame.suspect.size() != frame.points.size()) return false;
   const PoseDeviation before = pose_deviation(frame.T_cw, predicted_T_cw);
   if (!guard_.is_jump(before)) return false;
@@ -384,7 +469,7 @@ bool Tracker::guard_pose(map::MapView& view, Frame& frame, const geo::SE3& predi
     if (frame.suspect[i]) frame.points[i] = map::kNoPoint;
   }
   frame.T_cw = predicted_T_cw;
-  const int kept = optimize_pose(view, frame);
+  const int kept = optimize_pose(frame);
   const PoseDeviation after = pose_deviation(frame.T_cw, predicted_T_cw);
   if (guard_.accepts_resolve(before, after, kept, config_.min_inliers)) {
     ++guard_stats_.resolved;
@@ -401,7 +486,10 @@ bool Tracker::guard_pose(map::MapView& view, Frame& frame, const geo::SE3& predi
   return true;
 }
 
-bool Tracker::relocalize(map::MapView& view, Frame& frame) {
+bool Tracker::relocalize(Frame& frame) {
+  // Rare (the frame is lost), so one view over the whole search; the candidates' records and the
+  // local map are still read through the snapshot, as tracking does.
+  map::MapView view = map_.view(&lock_clock_);
   // Candidates: those of the provider (a BoW query over every keyframe of the map) first, then the
   // most recent keyframes and the covisibles of the last reference.
   std::vector<map::KeyframeId> ids = view.keyframe_ids_sorted();
@@ -421,17 +509,17 @@ bool Tracker::relocalize(map::MapView& view, Frame& frame) {
     candidates = std::move(first);
   }
   for (map::KeyframeId kid : candidates) {
-    const map::Keyframe* kf = view.keyframe(kid);
-    if (kf == nullptr || kf->bad) continue;
+    const std::optional<LocalMapSnapshot::Keyframe> kf = snapshot_.add_keyframe(view, kid);
+    if (!kf || kf->bad) continue;
     ++reloc_stats_.candidates_tried;
     frame.reset_matches();
-    if (match_keyframe(view, frame, *kf, 0.75f) < 15) continue;
+    if (match_keyframe(*kf, frame, 0.75f) < 15) continue;
     std::vector<cv::Point3f> object;
     std::vector<cv::Point2f> image;
     std::vector<std::size_t> feature_of;
     for (std::size_t i = 0; i < frame.points.size(); ++i) {
       if (frame.points[i] == map::kNoPoint) continue;
-      const map::MapPoint* p = view.live_point(frame.points[i]);
+      const LocalMapSnapshot::Point* p = snapshot_.live_point(frame.points[i]);
       if (p == nullptr) continue;
       object.emplace_back(static_cast<float>(p->position.x()), static_cast<float>(p->position.y()),
                           static_cast<float>(p->position.z()));
@@ -455,12 +543,15 @@ bool Tracker::relocalize(map::MapView& view, Frame& frame) {
     }
     frame.T_cw = geo::SE3(Eigen::Quaterniond(Re).normalized(), te);
     frame.has_pose = true;
-    if (optimize_pose(view, frame) < 10) continue;
+    if (optimize_pose(frame) < 10) continue;
     // Recover more matches by projection before accepting.
     update_local_map(view, frame);
-    match_local_points(view, frame, local_points_, 2.0 * config_.local_search_factor,
-                       MatchContext{camera_, pyramid_, depth_.bf});
-    if (optimize_pose(view, frame) >= config_.min_inliers_after_reloc) {
+    collect_local_points(frame);
+    snapshot_.copy_points(view, local_points_);
+    snapshot_.index_copies();
+    match_local_points(snapshot_, frame, local_points_, 2.0 * config_.local_search_factor,
+                       MatchContext{camera_, pyramid_, depth_.bf}, counters_);
+    if (optimize_pose(frame) >= config_.min_inliers_after_reloc) {
       reference_ = kid;
       last_reloc_frame_ = frame.index;
       relocalized_once_ = true;
@@ -472,7 +563,8 @@ bool Tracker::relocalize(map::MapView& view, Frame& frame) {
   return false;
 }
 
-bool Tracker::need_keyframe(map::MapView& view, const Frame& frame, const MappingStatus& mapping) const {
+bool Tracker::need_keyframe(const map::MapReader& view, const Frame& frame,
+                            const MappingStatus& mapping) const {
   KeyframeCandidate c;
   c.frames_since_keyframe = frame.index - last_keyframe_frame_;
   c.fps = fps_;
@@ -510,8 +602,9 @@ bool Tracker::need_keyframe(map::MapView& view, const Frame& frame, const Mappin
   return policy_->decide(c);
 }
 
-map::KeyframeId Tracker::create_keyframe(map::MapView& view, Frame& frame) {
-  map::Keyframe kf;
+Tracker::KeyframeDraft Tracker::draft_keyframe(const Frame& frame) const {
+  KeyframeDraft d;
+  map::Keyframe& kf = d.keyframe;
   kf.frame_index = frame.index;
   kf.stamp = frame.stamp;
   kf.T_cw = frame.T_cw;
@@ -522,17 +615,21 @@ map::KeyframeId Tracker::create_keyframe(map::MapView& view, Frame& frame) {
   for (std::size_t i = 0; i < frame.points.size(); ++i) {
     if (frame.points[i] != map::kNoPoint && !frame.outlier[i]) kf.points[i] = frame.points[i];
   }
-  const map::KeyframeId kid = view.add_keyframe(std::move(kf));
+  d.by_depth.resize(frame.features.size());
+  std::iota(d.by_depth.begin(), d.by_depth.end(), 0);
+  std::sort(d.by_depth.begin(), d.by_depth.end(),
+            [&](std::size_t a, std::size_t b) { return frame.features.depth[a] < frame.features.depth[b]; });
+  return d;
+}
+
+map::KeyframeId Tracker::create_keyframe(map::MapView& view, Frame& frame, KeyframeDraft draft) {
+  const map::KeyframeId kid = view.add_keyframe(std::move(draft.keyframe));
   map::Keyframe* stored = view.keyframe(kid);
 
   // RGB-D: new points straight from depth, closest first; all close ones and at least new_points_min.
-  std::vector<std::size_t> order(frame.features.size());
-  std::iota(order.begin(), order.end(), 0);
-  std::sort(order.begin(), order.end(),
-            [&](std::size_t a, std::size_t b) { return frame.features.depth[a] < frame.features.depth[b]; });
   const geo::SE3 T_wc = frame.T_cw.inverse();
   int created = 0;
-  for (std::size_t i : order) {
+  for (std::size_t i : draft.by_depth) {
     const float d = frame.features.depth[i];
     if (d <= 0) continue;
     if (d > depth_.close_depth && created >= config_.new_points_min) break;
@@ -553,7 +650,6 @@ map::KeyframeId Tracker::create_keyframe(map::MapView& view, Frame& frame) {
   view.update_connections(kid);
   reference_ = kid;
   last_keyframe_frame_ = frame.index;
-  refiner_.set_anchor(kid, frame);
   return kid;
 }
 

@@ -1,11 +1,15 @@
 #pragma once
 // Frame-to-map tracking: constant-velocity prediction, reference-keyframe fallback, relocalisation,
-// local-map tracking and the keyframe decision. Runs in the tracking thread; touches the map only
-// through short MapViews.
+// local-map tracking and the keyframe decision. Runs in the tracking thread. Matching, pose
+// optimisation, the sub-pixel refiner and the pose guard work on a LocalMapSnapshot copied under
+// short MapReaders; counters and keyframes are written back under one MapView at the end of the
+// frame. Relocalisation (rare) searches under one view.
 #include <functional>
 #include <memory>
 #include <optional>
 #include <string>
+#include <unordered_map>
+#include <unordered_set>
 #include <vector>
 
 #include "stillpoint/map/map.hpp"
@@ -13,6 +17,7 @@
 #include "stillpoint/tracking/anchor_refiner.hpp"
 #include "stillpoint/tracking/frame.hpp"
 #include "stillpoint/tracking/keyframe_policy.hpp"
+#include "stillpoint/tracking/local_map_snapshot.hpp"
 #include "stillpoint/tracking/pose_guard.hpp"
 #include "stillpoint/tracking/trajectory_recorder.hpp"
 
@@ -80,6 +85,9 @@ class Tracker {
           map::ScalePyramid pyramid, double fps);
 
   TrackOutcome track(Frame& frame, const MappingStatus& mapping);
+  // How long the last track() held the map lock (and waited for it), all its views together.
+  [[nodiscard]] double last_lock_ms() const { return last_lock_.held_ms; }
+  [[nodiscard]] const map::LockHoldClock::Times& last_lock() const { return last_lock_; }
 
   // The map holds a loaded map: frames relocalise in it instead of starting a new map, and count as
   // lost until one does. Call before the first frame.
@@ -103,24 +111,38 @@ class Tracker {
   [[nodiscard]] std::optional<geo::SE3> predicted_motion() const { return velocity_; }
 
  private:
+  TrackOutcome track_frame(Frame& frame, const MappingStatus& mapping);
+  // Writes the tracked frame's pose relative to its reference keyframe (held back while verifying).
+  void record_pose(Frame& frame, const geo::SE3& reference_T_cw, TrackOutcome& out);
   bool initialize(map::MapView& view, Frame& frame);
-  bool track_motion_model(map::MapView& view, Frame& frame);
-  bool track_reference_keyframe(map::MapView& view, Frame& frame);
-  bool relocalize(map::MapView& view, Frame& frame);
+  bool track_motion_model(Frame& frame);
+  bool track_reference_keyframe(Frame& frame);
+  bool relocalize(Frame& frame);
   // One frame of the check after a relocalisation: true while the frame agrees with the relocalised
   // pose's motion (see TrackerConfig::relocalization_verify_frames).
   [[nodiscard]] bool consistent_after_relocalization(const Frame& frame, const geo::SE3& expected_T_cw) const;
   // The relocalised pose passed its check: counted, and the frames tracked from it are written.
   void accept_relocalization();
-  bool track_local_map(map::MapView& view, Frame& frame);
+  bool track_local_map(Frame& frame);
   // The pose guard (PoseGuardConfig). True when the frame jumped: it must not become a keyframe.
-  bool guard_pose(map::MapView& view, Frame& frame, const geo::SE3& predicted_T_cw);
-  int optimize_pose(map::MapView& view, Frame& frame);
-  void update_local_map(map::MapView& view, Frame& frame);
-  void refresh_last_frame(map::MapView& view);
-  [[nodiscard]] bool need_keyframe(map::MapView& view, const Frame& frame,
+  bool guard_pose(Frame& frame, const geo::SE3& predicted_T_cw);
+  int optimize_pose(Frame& frame);
+  // Picks the local keyframes around the frame's matches (and the reference) and copies their point
+  // slots; collect_local_points() then picks the local points from them without the lock.
+  void update_local_map(const map::MapReader& view, Frame& frame);
+  void collect_local_points(const Frame& frame);
+  void refresh_last_frame(const map::MapReader& view);
+  [[nodiscard]] bool need_keyframe(const map::MapReader& view, const Frame& frame,
                                    const MappingStatus& mapping) const;
-  map::KeyframeId create_keyframe(map::MapView& view, Frame& frame);
+  // A keyframe is drafted from the frame without the lock (features, grid, thumbnail, features by
+  // depth), then stored with its new points under a view; the caller makes it the refiner's anchor
+  // after that view (the anchor's image pyramid needs no lock).
+  struct KeyframeDraft {
+    map::Keyframe keyframe;
+    std::vector<std::size_t> by_depth;  // features, closest first
+  };
+  [[nodiscard]] KeyframeDraft draft_keyframe(const Frame& frame) const;
+  map::KeyframeId create_keyframe(map::MapView& view, Frame& frame, KeyframeDraft draft);
 
   map::Map& map_;
   TrackerConfig config_;
@@ -140,6 +162,10 @@ class Tracker {
   std::uint64_t big_changes_seen_ = 0;
   std::vector<map::KeyframeId> local_keyframes_;
   std::vector<map::PointId> local_points_;
+  std::vector<map::PointId> local_slots_;  // the local keyframes' point slots, in keyframe order
+  bool local_slots_fresh_ = false;         // update_local_map() refilled them since the last collect
+  std::unordered_set<map::PointId> seen_;  // collect_local_points()' scratch, kept for its buckets
+  std::unordered_map<map::KeyframeId, int> keyframe_counts_;  // update_local_map()'s scratch, idem
   std::size_t lost_frames_ = 0;
   std::string why_lost_;  // the failed step and its counts, for the log when tracking is lost
   std::size_t relocalizations_ = 0;
@@ -154,7 +180,11 @@ class Tracker {
   PoseGuardRules guard_;
   PoseGuardStats guard_stats_;
   AnchorRefiner refiner_;
-  std::vector<bool> refined_;  // per feature of the frame being tracked: position aligned with the anchor
+  std::vector<bool> refined_;      // per feature of the frame being tracked: position aligned with the anchor
+  LocalMapSnapshot snapshot_;      // the map records this frame reads, copied under short readers
+  PointCounterUpdates counters_;   // ... and the counters it raises, written back at the end
+  map::LockHoldClock lock_clock_;  // every view the tracker takes is timed on it
+  map::LockHoldClock::Times last_lock_;
 };
 
 }  // namespace sp::track

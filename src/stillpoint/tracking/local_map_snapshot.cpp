@@ -1,0 +1,140 @@
+#include "stillpoint/tracking/local_map_snapshot.hpp"
+
+#include <algorithm>
+#include <cstring>
+
+namespace sp::track {
+
+void LocalMapSnapshot::reset(std::vector<map::KeyframeId> anchors) {
+  points_.clear();
+  anchor_features_.clear();
+  index_.clear();
+  poses_.clear();
+  unindexed_.clear();
+  anchors_ = std::move(anchors);
+}
+
+const LocalMapSnapshot::Point* LocalMapSnapshot::add(const map::MapReader& view, map::PointId id) {
+  const map::MapPoint* p = view.live_point(id);
+  if (p == nullptr) {
+    // Gone since an earlier copy (another stage culled it between two views): forget that copy.
+    if (const auto it = index_.find(id); it != index_.end()) {
+      index_.erase(points_[it->second].id);
+      index_.erase(id);
+    }
+    return nullptr;
+  }
+  const auto [it, inserted] = index_.try_emplace(p->id, points_.size());
+  const std::size_t slot = it->second;
+  if (inserted) {
+    points_.emplace_back();
+    anchor_features_.resize(points_.size() * anchors_.size(), -1);
+  }
+  copy(*p, slot);
+  if (id != p->id) index_[id] = slot;
+  return &points_[slot];
+}
+
+void LocalMapSnapshot::copy(const map::MapPoint& p, std::size_t slot) {
+  Point& c = points_[slot];
+  c.id = p.id;
+  c.position = p.position;
+  c.normal = p.normal;
+  c.min_distance = p.min_distance;
+  c.max_distance = p.max_distance;
+  const std::size_t bytes =
+      std::min<std::size_t>(c.descriptor.size(), p.descriptor.total() * p.descriptor.elemSize());
+  if (bytes > 0) std::memcpy(c.descriptor.data(), p.descriptor.ptr<std::uint8_t>(), bytes);
+  for (std::size_t a = 0; a < anchors_.size(); ++a) {
+    const auto obs = p.observations.find(anchors_[a]);
+    anchor_features_[slot * anchors_.size() + a] = obs == p.observations.end() ? -1 : obs->second;
+  }
+}
+
+void LocalMapSnapshot::copy_points(const map::MapReader& view, const std::vector<map::PointId>& ids) {
+  points_.reserve(points_.size() + ids.size());
+  anchor_features_.reserve(anchor_features_.size() + ids.size() * anchors_.size());
+  for (map::PointId id : ids) {
+    const map::MapPoint* p = view.live_point(id);
+    if (p == nullptr) {
+      unindexed_.emplace_back(id, kGone);
+      continue;
+    }
+    points_.emplace_back();
+    anchor_features_.resize(points_.size() * anchors_.size(), -1);
+    copy(*p, points_.size() - 1);
+    unindexed_.emplace_back(id, points_.size() - 1);
+  }
+}
+
+void LocalMapSnapshot::index_copies() {
+  for (const auto& [id, slot] : unindexed_) {
+    if (slot == kGone) {
+      if (const auto it = index_.find(id); it != index_.end()) {
+        index_.erase(points_[it->second].id);
+        index_.erase(id);
+      }
+      continue;
+    }
+    index_[points_[slot].id] = slot;  // a newer copy of a point copied before replaces it
+    index_[id] = slot;
+  }
+  unindexed_.clear();
+}
+
+const LocalMapSnapshot::Point* LocalMapSnapshot::live_point(map::PointId id) const {
+  const auto it = index_.find(id);
+  return it == index_.end() ? nullptr : &points_[it->second];
+}
+
+int LocalMapSnapshot::anchor_feature(const Point& p, map::KeyframeId anchor) const {
+  const auto a = std::find(anchors_.begin(), anchors_.end(), anchor);
+  if (a == anchors_.end()) return -1;
+  const auto slot = static_cast<std::size_t>(&p - points_.data());
+  return anchor_features_[slot * anchors_.size() + static_cast<std::size_t>(a - anchors_.begin())];
+}
+
+std::optional<LocalMapSnapshot::Keyframe> LocalMapSnapshot::add_keyframe(const map::MapReader& view,
+                                                                         map::KeyframeId id) {
+  const map::Keyframe* kf = view.keyframe(id);
+  if (kf == nullptr) return std::nullopt;
+  Keyframe c;
+  c.id = id;
+  c.bad = kf->bad;
+  c.T_cw = kf->T_cw;
+  c.descriptors = kf->features.descriptors.clone();
+  c.angles.reserve(kf->features.keypoints.size());
+  for (const cv::KeyPoint& kp : kf->features.keypoints) c.angles.push_back(kp.angle);
+  c.points.assign(kf->points.size(), map::kNoPoint);
+  for (std::size_t i = 0; i < kf->points.size(); ++i) {
+    if (kf->points[i] == map::kNoPoint) continue;
+    if (const Point* p = add(view, kf->points[i])) c.points[i] = p->id;
+  }
+  return c;
+}
+
+void LocalMapSnapshot::add_pose(const map::MapReader& view, map::KeyframeId id) {
+  if (const map::Keyframe* kf = view.keyframe(id)) poses_[id] = Pose{kf->T_cw, kf->bad};
+}
+
+const LocalMapSnapshot::Pose* LocalMapSnapshot::pose(map::KeyframeId id) const {
+  const auto it = poses_.find(id);
+  return it == poses_.end() ? nullptr : &it->second;
+}
+
+void PointCounterUpdates::apply(map::MapView& view) {
+  for (map::PointId id : visible_) {
+    if (map::MapPoint* p = view.live_point(id)) ++p->visible;
+  }
+  for (map::PointId id : found_) {
+    if (map::MapPoint* p = view.live_point(id)) ++p->found;
+  }
+  clear();
+}
+
+void PointCounterUpdates::clear() {
+  visible_.clear();
+  found_.clear();
+}
+
+}  // namespace sp::track
