@@ -17,22 +17,29 @@ void LocalMapSnapshot::reset(std::vector<map::KeyframeId> anchors) {
 const LocalMapSnapshot::Point* LocalMapSnapshot::add(const map::MapReader& view, map::PointId id) {
   const map::MapPoint* p = view.live_point(id);
   if (p == nullptr) {
-    // Gone since an earlier copy (another stage culled it between two views): forget that copy.
-    if (const auto it = index_.find(id); it != index_.end()) {
-      index_.erase(points_[it->second].id);
-      index_.erase(id);
-    }
+    forget(id);  // gone since an earlier copy (another stage culled it between two views)
     return nullptr;
   }
   const auto [it, inserted] = index_.try_emplace(p->id, points_.size());
   const std::size_t slot = it->second;
-  if (inserted) {
-    points_.emplace_back();
-    anchor_features_.resize(points_.size() * anchors_.size(), -1);
-  }
+  if (inserted) new_slot();
   copy(*p, slot);
   if (id != p->id) index_[id] = slot;
   return &points_[slot];
+}
+
+std::size_t LocalMapSnapshot::new_slot() {
+  points_.emplace_back();
+  anchor_features_.resize(points_.size() * anchors_.size(), -1);
+  return points_.size() - 1;
+}
+
+void LocalMapSnapshot::forget(map::PointId id) {
+  // The copy found under this id, and the id it was copied as (a replaced point's successor).
+  if (const auto it = index_.find(id); it != index_.end()) {
+    index_.erase(points_[it->second].id);
+    index_.erase(id);
+  }
 }
 
 void LocalMapSnapshot::copy(const map::MapPoint& p, std::size_t slot) {
@@ -60,20 +67,16 @@ void LocalMapSnapshot::copy_points(const map::MapReader& view, const std::vector
       unindexed_.emplace_back(id, kGone);
       continue;
     }
-    points_.emplace_back();
-    anchor_features_.resize(points_.size() * anchors_.size(), -1);
-    copy(*p, points_.size() - 1);
-    unindexed_.emplace_back(id, points_.size() - 1);
+    const std::size_t slot = new_slot();
+    copy(*p, slot);
+    unindexed_.emplace_back(id, slot);
   }
 }
 
 void LocalMapSnapshot::index_copies() {
   for (const auto& [id, slot] : unindexed_) {
     if (slot == kGone) {
-      if (const auto it = index_.find(id); it != index_.end()) {
-        index_.erase(points_[it->second].id);
-        index_.erase(id);
-      }
+      forget(id);
       continue;
     }
     index_[points_[slot].id] = slot;  // a newer copy of a point copied before replaces it

@@ -67,6 +67,8 @@ class LocalMapSnapshot {
   [[nodiscard]] std::size_t size() const { return points_.size(); }
 
  private:
+  std::size_t new_slot();        // an empty copy appended, with its anchor-feature row
+  void forget(map::PointId id);  // drops the copy found under id from the index
   void copy(const map::MapPoint& p, std::size_t slot);
 
   std::vector<Point> points_;
