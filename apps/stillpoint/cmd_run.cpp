@@ -77,6 +77,7 @@ struct RunArgs {
   bool dense_cloud = false;
   std::vector<std::string> overrides;  // --set section.key=value
   int viewer_port = -1;                // --viewer [PORT]; -1 = no live view
+  double playback_rate = 0;            // --playback-rate / --realtime; 0 = as fast as possible
 };
 
 // The data folder (config/, data/, models/) of this binary: $STILLPOINT_DATA_DIR, else share/stillpoint
@@ -227,6 +228,8 @@ int run(const RunArgs& args) {
   if (!args.load_map.empty()) options.load_map = args.load_map;
   if (!args.save_map.empty()) options.save_map = args.save_map;
   options.dense_cloud = args.dense_cloud;
+  if (args.camera != "openni2") options.playback_rate = args.playback_rate;  // a live camera paces itself
+  if (options.playback_rate > 0) options.extra_stats["playback_rate"] = options.playback_rate;
 #ifdef SP_HAVE_LIVE_VIEW
   std::unique_ptr<report::LiveViewServer> live;
   if (args.viewer_port >= 0) {
@@ -296,6 +299,12 @@ void add_run_command(CLI::App& app) {
   cmd->add_flag("--deterministic", args->deterministic,
                 "Fixed seeds, stages in lock-step: identical output twice");
   cmd->add_option("--max-frames", args->max_frames, "Stop after this many frames (0 = all)");
+  cmd->add_option("--playback-rate", args->playback_rate,
+                  "Hand frames to SLAM at this multiple of their recorded pace, like a live camera (1 = "
+                  "real time; late frames are processed at once, never dropped; 0 = as fast as possible)")
+      ->check(CLI::Range(0.0, 1000.0));
+  cmd->add_flag_callback(
+      "--realtime", [args] { args->playback_rate = 1.0; }, "Same as --playback-rate 1");
   cmd->add_flag("--no-progress", args->no_progress, "No progress bar");
   cmd->add_flag("--dense-cloud", args->dense_cloud,
                 "Also write dense_cloud.ply from keyframe depth (dynamic regions removed)");

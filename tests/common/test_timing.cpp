@@ -17,6 +17,28 @@ TEST(Timing, SummaryOfKnownSamples) {
   EXPECT_DOUBLE_EQ(s.max, 5.0);
 }
 
+TEST(PlaybackClock, FramesAreDueAtTheirRecordedTimeScaledByTheRate) {
+  using namespace std::chrono_literals;
+  PlaybackClock clock(2.0);  // twice the recorded pace
+  const auto t0 = PlaybackClock::Clock::now();
+  EXPECT_EQ(clock.due_in(100.0, t0), PlaybackClock::Clock::duration::zero());  // the first frame anchors
+  // Recorded 1 s after the first: due 0.5 s after it; 0.1 s have passed.
+  const auto wait = clock.due_in(101.0, t0 + 100ms);
+  EXPECT_NEAR(std::chrono::duration<double>(wait).count(), 0.4, 1e-6);
+  // A frame whose time has passed (tracking fell behind) is not delayed.
+  EXPECT_EQ(clock.due_in(100.5, t0 + 1s), PlaybackClock::Clock::duration::zero());
+  // Nor one stamped before the first (an unordered sequence).
+  EXPECT_EQ(clock.due_in(99.0, t0), PlaybackClock::Clock::duration::zero());
+}
+
+TEST(PlaybackClock, RateZeroNeverWaits) {
+  using namespace std::chrono_literals;
+  PlaybackClock clock(0.0);
+  const auto t0 = PlaybackClock::Clock::now();
+  EXPECT_EQ(clock.due_in(0.0, t0), PlaybackClock::Clock::duration::zero());
+  EXPECT_EQ(clock.due_in(50.0, t0 + 1ms), PlaybackClock::Clock::duration::zero());
+}
+
 TEST(Timing, EmptySummaryIsZero) {
   const auto s = summarize({});
   EXPECT_EQ(s.count, 0u);

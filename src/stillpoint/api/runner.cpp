@@ -111,6 +111,7 @@ RunResult run_slam(io::FrameSource& source, const pipeline::SystemConfig& config
   if (options.load_map) system.load_map(*options.load_map);
   ProgressBar bar(options.label.empty() ? "tracking" : options.label, source.size_hint(), options.progress);
   Stopwatch wall;
+  PlaybackClock pace(options.playback_rate);
   std::size_t done = 0;
   std::size_t lost = 0;
   bool interrupted = false;
@@ -127,6 +128,7 @@ RunResult run_slam(io::FrameSource& source, const pipeline::SystemConfig& config
       auto data = source.next();
       slam.times().add("load", load.elapsed_ms());
       if (!data) break;
+      if (options.playback_rate > 0) pace.wait_for(data->stamp);
       const stillpoint::TrackResult tracked = SystemAccess::track(system, *data);
       if (on_frame) {
         try {

@@ -34,6 +34,11 @@ struct RunOptions {
   // [frames done, MiB] (plus one sample after the stages have drained); 0 = off. scripts/soak.sh
   // reads it to check that memory stays flat over a long run.
   std::size_t rss_every_frames = 100;
+  // Frames are handed to SLAM no earlier than their recorded time, scaled: 1 plays a sequence back like
+  // the live camera that recorded it (what ORB-SLAM's and NGD-SLAM's TUM examples do: the threads
+  // then share the CPU as on a robot), 2 twice as fast; 0 = as fast as the system goes. A frame that
+  // is due while the previous one is still being tracked is processed at once, never dropped.
+  double playback_rate = 0;
   // Called on the tracking thread after each frame (the live view, `run --viewer`); an exception
   // from it is logged and the observer dropped, the run goes on.
   std::function<void(const io::FrameData&, const stillpoint::TrackResult&, stillpoint::System&)> on_frame;

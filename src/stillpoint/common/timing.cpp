@@ -2,6 +2,7 @@
 
 #include <fstream>
 #include <sstream>
+#include <thread>
 
 namespace sp {
 
@@ -27,5 +28,10 @@ double proc_status_mib(const std::string& key) {
 double peak_rss_mib() { return proc_status_mib("VmHWM:"); }
 
 double current_rss_mib() { return proc_status_mib("VmRSS:"); }
+
+void PlaybackClock::wait_for(double stamp) {
+  const auto wait = due_in(stamp, Clock::now());
+  if (wait > Clock::duration::zero()) std::this_thread::sleep_for(wait);
+}
 
 }  // namespace sp

@@ -46,6 +46,37 @@ inline SampleSummary summarize(std::vector<double> samples) {
   return s;
 }
 
+// Plays frames back at their recorded pace (scaled by `rate`), like the camera that recorded them: the
+// first frame anchors the clock, a later one is due at anchor + (stamp - first stamp) / rate. Frames
+// that are already due are not delayed (and never dropped). rate <= 0: every frame is due at once.
+class PlaybackClock {
+ public:
+  using Clock = std::chrono::steady_clock;
+  explicit PlaybackClock(double rate) : rate_(rate) {}
+
+  // How long a frame stamped `stamp` (seconds) still has to wait at `now`.
+  [[nodiscard]] Clock::duration due_in(double stamp, Clock::time_point now) {
+    if (rate_ <= 0) return Clock::duration::zero();
+    if (!anchored_) {
+      anchored_ = true;
+      first_stamp_ = stamp;
+      anchor_ = now;
+      return Clock::duration::zero();
+    }
+    const auto due = anchor_ + std::chrono::duration_cast<Clock::duration>(
+                                   std::chrono::duration<double>((stamp - first_stamp_) / rate_));
+    return due > now ? due - now : Clock::duration::zero();
+  }
+
+  void wait_for(double stamp);  // sleeps for due_in(stamp, now)
+
+ private:
+  double rate_;
+  bool anchored_ = false;
+  double first_stamp_ = 0;
+  Clock::time_point anchor_;
+};
+
 // Per-stage millisecond samples, written by several threads.
 class StageTimes {
  public:

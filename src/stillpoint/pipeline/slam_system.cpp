@@ -103,8 +103,8 @@ SlamSystem::SlamSystem(SystemConfig config, io::CameraConfig camera, const Syste
   mapping_stage_ =
       std::make_unique<LocalMappingStage>(mapper_, times_, downstream, config_.pipeline.mapping_queue);
   if (!deterministic_) {
-    if (loop_stage_) loop_stage_->start();
-    mapping_stage_->start();
+    if (loop_stage_) loop_stage_->start(config_.pipeline.loop_nice);
+    mapping_stage_->start(config_.pipeline.mapping_nice);
   }
 }
 

@@ -32,6 +32,8 @@ PipelineConfig PipelineConfig::from_yaml(const ConfigReader& r) {
   PipelineConfig c;
   r.read("mapping_queue", c.mapping_queue, std::size_t{1}, std::size_t{1000});
   r.read("loop_queue", c.loop_queue, std::size_t{1}, std::size_t{1000});
+  r.read("mapping_nice", c.mapping_nice, 0, 19);
+  r.read("loop_nice", c.loop_nice, 0, 19);
   return c;
 }
 

@@ -18,6 +18,8 @@ namespace sp::pipeline {
 struct PipelineConfig {
   std::size_t mapping_queue = 8;  // keyframes waiting for local mapping
   std::size_t loop_queue = 16;    // keyframes waiting for loop closing
+  int mapping_nice = 0;           // niceness of the local-mapping thread (tracking keeps 0)
+  int loop_nice = 0;              // niceness of the loop-closing thread
   static PipelineConfig from_yaml(const ConfigReader& r);
 };
 

@@ -2,6 +2,8 @@
 // A pipeline stage: one job, one input queue, one thread. In deterministic mode the owner calls
 // process() itself in lock-step instead of starting the thread.
 #include <spdlog/spdlog.h>
+#include <sys/resource.h>
+#include <unistd.h>
 
 #include <atomic>
 #include <functional>
@@ -22,9 +24,15 @@ class ThreadedStage {
   ThreadedStage(const ThreadedStage&) = delete;
   ThreadedStage& operator=(const ThreadedStage&) = delete;
 
-  void start() {
+  // `niceness` > 0 lowers the thread's scheduling priority (Linux applies it per thread), so the
+  // tracking thread wins the CPU when the cores are shared.
+  void start(int niceness = 0) {
     if (thread_.joinable()) return;
-    thread_ = std::thread([this] { spin(); });
+    thread_ = std::thread([this, niceness] {
+      if (niceness > 0 && setpriority(PRIO_PROCESS, static_cast<id_t>(::gettid()), niceness) != 0)
+        spdlog::warn("{} thread: could not lower its priority", name_);
+      spin();
+    });
   }
   // Finishes the queued work, then joins. Safe to call twice.
   void stop() {
