@@ -104,9 +104,14 @@ std::optional<FrameData> TumSequence::load(const Entry& e) const {
     return std::nullopt;
   }
   raw.convertTo(f.depth, CV_32F, 1.0 / camera_.depth_factor);
-  // Readings outside the sensor's trusted range become invalid (0), like missing ones.
-  const cv::Mat out_of_range = (f.depth < camera_.depth_min) | (f.depth > camera_.depth_max);
-  f.depth.setTo(0.0f, out_of_range);
+  // Readings outside the sensor's trusted range become invalid (0), like missing ones. One pass: the
+  // reader shares the cores with tracking.
+  const auto lo = static_cast<float>(camera_.depth_min), hi = static_cast<float>(camera_.depth_max);
+  for (int r = 0; r < f.depth.rows; ++r) {
+    auto* row = f.depth.ptr<float>(r);
+    for (int c = 0; c < f.depth.cols; ++c)
+      if (row[c] < lo || row[c] > hi) row[c] = 0.0f;
+  }
   return f;
 }
 
