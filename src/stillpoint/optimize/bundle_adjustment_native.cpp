@@ -489,17 +489,27 @@ class NativeBundleAdjuster {
         iteration_cost = new_cost;
       }
     }
+    spdlog::debug("BA pass (native): {} residuals, {} free poses, {} points, {} iterations, cost {} -> {}",
+                  pass_obs_.size(), free_kf_.size(), pass_points_.size(), s.iterations, s.initial_cost,
+                  s.final_cost);
     return s;
   }
 
-  // chi-square test of every observation at the current state (as the Ceres path).
-  void classify(std::vector<bool>& outlier) const {
+  // chi-square test of every observation at the current state (as the Ceres path, which converts
+  // the pose per observation; here once per keyframe, with the same result).
+  void classify(std::vector<bool>& outlier) {
+    std::vector<char> converted(poses_.size(), 0);
     for (std::size_t i = 0; i < problem_.observations.size(); ++i) {
+      const std::size_t k = index_.kf[i];
+      if (!converted[k]) {
+        const geo::SE3 T = from_params(poses_[k].data());
+        R_[k] = T.rotation();
+        t_[k] = T.translation();
+        converted[k] = 1;
+      }
       const BAObservation& o = problem_.observations[i];
-      const geo::SE3 T = from_params(poses_[index_.kf[i]].data());
-      const Reprojection rep =
-          evaluate_reprojection(camera_, T.rotation(), T.translation(), points_[index_.pt[i]], o.uv,
-                                o.u_right, sqrt_info_[i], false, false);
+      const Reprojection rep = evaluate_reprojection(camera_, R_[k], t_[k], points_[index_.pt[i]], o.uv,
+                                                     o.u_right, sqrt_info_[i], false, false);
       const double threshold = rep.dim == 2 ? config_.chi2_mono : config_.chi2_stereo;
       outlier[i] = rep.depth <= 0 || rep.chi2() > threshold;
     }
