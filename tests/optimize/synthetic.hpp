@@ -112,8 +112,11 @@ inline BAScene make_ba_scene(const BASceneSpec& spec) {
       if (u01(rng) < spec.stereo_ratio) o.u_right = proj.z() + spec.pixel_noise * sigma * nr;
       const bool gross = u01(rng) < spec.outlier_ratio;
       if (gross) {
-        const double du = (u01(rng) < 0.5 ? -1 : 1) * (20.0 + 20.0 * u01(rng));
-        const double dv = (u01(rng) < 0.5 ? -1 : 1) * (20.0 + 20.0 * u01(rng));
+        // One draw per statement (operand evaluation order is unspecified, see random_points).
+        const double su = u01(rng) < 0.5 ? -1.0 : 1.0;
+        const double du = su * (20.0 + 20.0 * u01(rng));
+        const double sv = u01(rng) < 0.5 ? -1.0 : 1.0;
+        const double dv = sv * (20.0 + 20.0 * u01(rng));
         o.uv += Eigen::Vector2d(du, dv);
         if (o.u_right >= 0) o.u_right += du;
       }
