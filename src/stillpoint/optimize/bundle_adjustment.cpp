@@ -5,23 +5,16 @@
 #include <memory>
 #include <string>
 #include <unordered_map>
+#include <utility>
 
 #include "stillpoint/common/error.hpp"
+#include "stillpoint/optimize/bundle_adjustment_native.hpp"
 #include "stillpoint/optimize/ceres_terms.hpp"
 
 namespace sp::opt {
-namespace {
+namespace detail {
 
-// Above this many free keyframes the reduced camera system is factorised sparsely (SuiteSparse);
-// below, its dense Cholesky is as fast (measured equal within noise at 12 free poses / 2000 points)
-// and needs no symbolic analysis.
-constexpr int kDenseSchurMaxPoses = 40;
-
-struct Indexed {
-  std::vector<std::size_t> kf, pt;  // per observation
-};
-
-Indexed index_observations(const BAProblem& problem) {
+BAIndex index_observations(const BAProblem& problem) {
   std::unordered_map<std::uint64_t, std::size_t> kf_index, pt_index;
   kf_index.reserve(problem.keyframes.size());
   pt_index.reserve(problem.points.size());
@@ -35,7 +28,7 @@ Indexed index_observations(const BAProblem& problem) {
       throw Error("run_bundle_adjustment: duplicate point id " + std::to_string(problem.points[i].id));
     }
   }
-  Indexed idx;
+  BAIndex idx;
   idx.kf.reserve(problem.observations.size());
   idx.pt.reserve(problem.observations.size());
   for (const BAObservation& o : problem.observations) {
@@ -50,6 +43,28 @@ Indexed index_observations(const BAProblem& problem) {
   }
   return idx;
 }
+
+int count_free_keyframes(const BAProblem& problem, const BAIndex& index) {
+  std::vector<bool> observed(problem.keyframes.size(), false);
+  for (const std::size_t k : index.kf) observed[k] = true;
+  int free = 0;
+  for (std::size_t k = 0; k < problem.keyframes.size(); ++k) {
+    if (observed[k] && !problem.keyframes[k].fixed) ++free;
+  }
+  return free;
+}
+
+}  // namespace detail
+
+namespace {
+
+using detail::BAIndex;
+using detail::index_observations;
+
+// Above this many free keyframes the reduced camera system is factorised sparsely (SuiteSparse);
+// below, its dense Cholesky is as fast (measured equal within noise at 12 free poses / 2000 points)
+// and needs no symbolic analysis.
+constexpr int kDenseSchurMaxPoses = 40;
 
 class BundleAdjuster {
  public:
@@ -187,7 +202,7 @@ class BundleAdjuster {
   BAProblem& problem_;
   const CameraModel& camera_;
   const BAConfig& config_;
-  Indexed index_;
+  BAIndex index_;
   std::vector<PoseParams> poses_;
   std::vector<std::array<double, 3>> points_;
   std::vector<double> sqrt_info_;
@@ -205,11 +220,23 @@ BAConfig BAConfig::from_yaml(const ConfigReader& r) {
   r.read("chi2_mono", c.chi2_mono, 0.1, 1000.0);
   r.read("chi2_stereo", c.chi2_stereo, 0.1, 1000.0);
   r.read("threads", c.threads, 1, 64);
+  r.read_choice("solver", c.solver, {"native", "ceres"});
   return c;
 }
 
 BAResult run_bundle_adjustment(BAProblem& problem, const CameraModel& camera, const BAConfig& config,
                                const std::atomic<bool>* abort) {
+  if (config.solver == "native") {
+    BAIndex index = index_observations(problem);
+    const int free_keyframes = detail::count_free_keyframes(problem, index);
+    if (free_keyframes <= kNativeBAMaxFreeKeyframes) {
+      return detail::run_native_bundle_adjustment(problem, camera, config, abort, std::move(index));
+    }
+    spdlog::debug("bundle adjustment: {} free keyframes > {}, Ceres instead of the native solver",
+                  free_keyframes, kNativeBAMaxFreeKeyframes);
+  } else if (config.solver != "ceres") {
+    throw Error("run_bundle_adjustment: unknown solver '" + config.solver + "' (native | ceres)");
+  }
   BundleAdjuster adjuster(problem, camera, config, abort);
   return adjuster.run();
 }

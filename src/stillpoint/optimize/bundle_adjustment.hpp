@@ -3,9 +3,17 @@
 // also usable as global BA with the first keyframe fixed). Two passes: Huber-robust first pass,
 // chi-square outlier rejection (and points behind the camera), then a second pass without them.
 // Point blocks are eliminated first (Schur complement). Deterministic with threads = 1.
+//
+// Two solvers behind the same function (BAConfig::solver): "native" (default), a hand-written
+// Levenberg-Marquardt that follows Ceres' trust-region LM step for step (same damping, step
+// acceptance and stopping rules) with an explicit Schur complement over fixed-size Eigen blocks and
+// a dense reduced camera system; "ceres", Ceres with DENSE_SCHUR / SPARSE_SCHUR, the reference.
+// The native solver hands problems with more than kNativeBAMaxFreeKeyframes free keyframes to Ceres
+// (its reduced camera system is dense, 6n x 6n).
 #include <Eigen/Core>
 #include <atomic>
 #include <cstdint>
+#include <string>
 #include <vector>
 
 #include "stillpoint/common/config_reader.hpp"
@@ -39,13 +47,17 @@ struct BAProblem {
 };
 
 struct BAConfig {
-  int iterations_first = 5;    // LM iterations of the robust first pass, [1, 1000]
-  int iterations_second = 10;  // LM iterations after outlier removal, [0, 1000] (0 = single pass)
-  double chi2_mono = 5.991;    // chi-square threshold, 2 dof, [0.1, 1000]
-  double chi2_stereo = 7.815;  // chi-square threshold, 3 dof, [0.1, 1000]
-  int threads = 1;             // Ceres threads, [1, 64]; 1 is deterministic
+  int iterations_first = 5;       // LM iterations of the robust first pass, [1, 1000]
+  int iterations_second = 10;     // LM iterations after outlier removal, [0, 1000] (0 = single pass)
+  double chi2_mono = 5.991;       // chi-square threshold, 2 dof, [0.1, 1000]
+  double chi2_stereo = 7.815;     // chi-square threshold, 3 dof, [0.1, 1000]
+  int threads = 1;                // Ceres threads, [1, 64]; 1 is deterministic
+  std::string solver = "native";  // native | ceres (native falls back to Ceres above 60 free keyframes)
   static BAConfig from_yaml(const ConfigReader& r);
 };
+
+// Above this many free (non-fixed, observed) keyframes the native solver runs the Ceres path.
+inline constexpr int kNativeBAMaxFreeKeyframes = 60;
 
 struct BAResult {
   std::vector<bool> outlier;  // per observation: chi2 above threshold or behind the camera at the end
