@@ -20,11 +20,10 @@ const LocalMapSnapshot::Point* LocalMapSnapshot::add(const map::MapReader& view,
     forget(id);  // gone since an earlier copy (another stage culled it between two views)
     return nullptr;
   }
-  const auto [it, inserted] = index_.try_emplace(p->id, points_.size());
-  const std::size_t slot = it->second;
+  const auto [slot, inserted] = index_.try_emplace(p->id, points_.size());
   if (inserted) new_slot();
   copy(*p, slot);
-  if (id != p->id) index_[id] = slot;
+  if (id != p->id) index_.insert_or_assign(id, slot);
   return &points_[slot];
 }
 
@@ -36,8 +35,8 @@ std::size_t LocalMapSnapshot::new_slot() {
 
 void LocalMapSnapshot::forget(map::PointId id) {
   // The copy found under this id, and the id it was copied as (a replaced point's successor).
-  if (const auto it = index_.find(id); it != index_.end()) {
-    index_.erase(points_[it->second].id);
+  if (const std::size_t* slot = index_.find(id)) {
+    index_.erase(points_[*slot].id);
     index_.erase(id);
   }
 }
@@ -79,15 +78,15 @@ void LocalMapSnapshot::index_copies() {
       forget(id);
       continue;
     }
-    index_[points_[slot].id] = slot;  // a newer copy of a point copied before replaces it
-    index_[id] = slot;
+    index_.insert_or_assign(points_[slot].id, slot);  // a newer copy of a point copied before replaces it
+    index_.insert_or_assign(id, slot);
   }
   unindexed_.clear();
 }
 
 const LocalMapSnapshot::Point* LocalMapSnapshot::live_point(map::PointId id) const {
-  const auto it = index_.find(id);
-  return it == index_.end() ? nullptr : &points_[it->second];
+  const std::size_t* slot = index_.find(id);
+  return slot == nullptr ? nullptr : &points_[*slot];
 }
 
 int LocalMapSnapshot::anchor_feature(const Point& p, map::KeyframeId anchor) const {
