@@ -1,9 +1,8 @@
 #include "stillpoint/dynamic/async_detector.hpp"
 
 #include <spdlog/spdlog.h>
-#include <sys/resource.h>
-#include <unistd.h>
 
+#include "stillpoint/common/thread_priority.hpp"
 #include "stillpoint/dynamic/yolo_detector.hpp"
 
 namespace sp::dyn {
@@ -12,9 +11,7 @@ AsyncDetector::AsyncDetector(DetectFn detect, Mode mode, int niceness)
     : detect_(std::move(detect)), mode_(mode) {
   if (mode_ == Mode::kAsync) {
     worker_ = std::thread([this, niceness] {
-      // Linux applies a nice value to the calling thread only (tid), not to the whole process.
-      if (niceness > 0 && setpriority(PRIO_PROCESS, static_cast<id_t>(::gettid()), niceness) != 0)
-        spdlog::warn("detector thread: could not lower its priority");
+      lower_this_thread_priority(niceness, "detector");
       run();
     });
   }

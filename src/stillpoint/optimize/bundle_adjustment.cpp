@@ -69,11 +69,11 @@ constexpr int kDenseSchurMaxPoses = 40;
 class BundleAdjuster {
  public:
   BundleAdjuster(BAProblem& problem, const CameraModel& camera, const BAConfig& config,
-                 const std::atomic<bool>* abort)
+                 const std::atomic<bool>* abort, BAIndex index)
       : problem_(problem),
         camera_(camera),
         config_(config),
-        index_(index_observations(problem)),
+        index_(std::move(index)),
         huber_mono_(std::sqrt(config.chi2_mono)),
         huber_stereo_(std::sqrt(config.chi2_stereo)),
         abort_callback_(abort) {
@@ -185,8 +185,7 @@ class BundleAdjuster {
       const Eigen::Map<const Eigen::Vector3d> p(points_[index_.pt[i]].data());
       const Reprojection rep = evaluate_reprojection(camera_, T.rotation(), T.translation(), p, o.uv,
                                                      o.u_right, sqrt_info_[i], false, false);
-      const double threshold = rep.dim == 2 ? config_.chi2_mono : config_.chi2_stereo;
-      outlier[i] = rep.depth <= 0 || rep.chi2() > threshold;
+      outlier[i] = rep.is_outlier(config_.chi2_mono, config_.chi2_stereo);
     }
   }
 
@@ -226,18 +225,18 @@ BAConfig BAConfig::from_yaml(const ConfigReader& r) {
 
 BAResult run_bundle_adjustment(BAProblem& problem, const CameraModel& camera, const BAConfig& config,
                                const std::atomic<bool>* abort) {
+  if (config.solver != "native" && config.solver != "ceres")
+    throw Error("run_bundle_adjustment: unknown solver '" + config.solver + "' (native | ceres)");
+  BAIndex index = index_observations(problem);  // checks the ids for both solvers
   if (config.solver == "native") {
-    BAIndex index = index_observations(problem);
     const int free_keyframes = detail::count_free_keyframes(problem, index);
     if (free_keyframes <= kNativeBAMaxFreeKeyframes) {
       return detail::run_native_bundle_adjustment(problem, camera, config, abort, std::move(index));
     }
     spdlog::debug("bundle adjustment: {} free keyframes > {}, Ceres instead of the native solver",
                   free_keyframes, kNativeBAMaxFreeKeyframes);
-  } else if (config.solver != "ceres") {
-    throw Error("run_bundle_adjustment: unknown solver '" + config.solver + "' (native | ceres)");
   }
-  BundleAdjuster adjuster(problem, camera, config, abort);
+  BundleAdjuster adjuster(problem, camera, config, abort, std::move(index));
   return adjuster.run();
 }
 

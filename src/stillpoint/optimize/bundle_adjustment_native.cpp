@@ -38,9 +38,9 @@
 namespace sp::opt::detail {
 namespace {
 
-using Mat6 = Eigen::Matrix<double, 6, 6>;
+using geo::Mat6;
+using geo::Vec6;
 using Mat63 = Eigen::Matrix<double, 6, 3>;
-using Vec6 = Eigen::Matrix<double, 6, 1>;
 
 // ceres::Solver::Options defaults (the Ceres path sets none of them).
 constexpr double kInitialRadius = 1e4;
@@ -510,8 +510,7 @@ class NativeBundleAdjuster {
       const BAObservation& o = problem_.observations[i];
       const Reprojection rep = evaluate_reprojection(camera_, R_[k], t_[k], points_[index_.pt[i]], o.uv,
                                                      o.u_right, sqrt_info_[i], false, false);
-      const double threshold = rep.dim == 2 ? config_.chi2_mono : config_.chi2_stereo;
-      outlier[i] = rep.depth <= 0 || rep.chi2() > threshold;
+      outlier[i] = rep.is_outlier(config_.chi2_mono, config_.chi2_stereo);
     }
   }
 

@@ -115,8 +115,7 @@ PoseOptimizationResult optimize_pose(geo::SE3& T_cw, const std::vector<PoseObser
       const PoseObservation& o = observations[i];
       const Reprojection rep = evaluate_reprojection(camera, R, T_cw.translation(), o.point_w, o.uv,
                                                      o.u_right, sqrt_info[i], false, false);
-      const double threshold = rep.dim == 2 ? config.chi2_mono : config.chi2_stereo;
-      result.outlier[i] = rep.depth <= 0 || rep.chi2() > threshold;
+      result.outlier[i] = rep.is_outlier(config.chi2_mono, config.chi2_stereo);
       if (!result.outlier[i]) ++result.inliers;
     }
     if (result.inliers < 10) break;  // too few to trust another round (as ORB-SLAM)

@@ -49,6 +49,11 @@ struct Reprojection {
   int dim = 2;
   // Squared weighted error, the chi-square statistic compared with chi2_mono / chi2_stereo.
   [[nodiscard]] double chi2() const { return residual.head(dim).squaredNorm(); }
+  // The chi-square outlier test of ORB-SLAM's optimisers: behind the camera, or chi2 above the
+  // threshold of its dimension (2: monocular, 3: with the virtual right coordinate).
+  [[nodiscard]] bool is_outlier(double chi2_mono, double chi2_stereo) const {
+    return depth <= 0 || chi2() > (dim == 2 ? chi2_mono : chi2_stereo);
+  }
 };
 
 inline Reprojection evaluate_reprojection(const CameraModel& cam, const Eigen::Matrix3d& R_cw,

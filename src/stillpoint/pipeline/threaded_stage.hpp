@@ -2,8 +2,6 @@
 // A pipeline stage: one job, one input queue, one thread. In deterministic mode the owner calls
 // process() itself in lock-step instead of starting the thread.
 #include <spdlog/spdlog.h>
-#include <sys/resource.h>
-#include <unistd.h>
 
 #include <atomic>
 #include <functional>
@@ -11,6 +9,7 @@
 #include <thread>
 
 #include "stillpoint/common/bounded_queue.hpp"
+#include "stillpoint/common/thread_priority.hpp"
 
 namespace sp::pipeline {
 
@@ -29,8 +28,7 @@ class ThreadedStage {
   void start(int niceness = 0) {
     if (thread_.joinable()) return;
     thread_ = std::thread([this, niceness] {
-      if (niceness > 0 && setpriority(PRIO_PROCESS, static_cast<id_t>(::gettid()), niceness) != 0)
-        spdlog::warn("{} thread: could not lower its priority", name_);
+      lower_this_thread_priority(niceness, name_);
       spin();
     });
   }
