@@ -4,6 +4,7 @@
 // relocalisation. Exact data, so the bounds are the solver's tolerance, far below a pixel's worth.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <chrono>
 
 #include "../support/synthetic_map.hpp"
@@ -69,6 +70,30 @@ TEST_F(TrackerTest, RecoversEveryPoseOfAKnownPath) {
     EXPECT_LT(d.rotation_deg, 0.02) << "frame " << i;
   }
   EXPECT_EQ(t->lost_frames(), 0u);
+}
+
+// ORB-SLAM3's RGB-D initialisation: the first keyframe makes a map point of every feature with a
+// depth reading, far ones too; later keyframes only of the close ones (at least new_points_min). The
+// slab spans 2-4 m around the 3.2 m close-depth limit, so the two rules must give different maps.
+TEST_F(TrackerTest, TheFirstKeyframeMakesAPointOfEveryFeatureWithDepth) {
+  const Frame probe = make_frame(scene_, path_pose(0), 0, cam_, depth_.bf);
+  const auto with_depth = static_cast<std::size_t>(
+      std::count_if(probe.features.depth.begin(), probe.features.depth.end(), [](float d) { return d > 0; }));
+  const auto close =
+      static_cast<std::size_t>(std::count_if(probe.features.depth.begin(), probe.features.depth.end(),
+                                             [&](float d) { return d > 0 && d <= depth_.close_depth; }));
+  ASSERT_GT(with_depth, close + 100) << "the scene must have far features for this test";
+  ASSERT_GT(close, static_cast<std::size_t>(config_.new_points_min));
+
+  for (const bool all : {true, false}) {
+    map::Map map;
+    config_.init_all_depth_points = all;
+    Tracker t(map, config_, cam_, depth_, pyramid_, 30.0);
+    Frame f = make_frame(scene_, path_pose(0), 0, cam_, depth_.bf);
+    ASSERT_EQ(t.track(f, {}).state, TrackingState::Ok);
+    map::MapView view = map.view();
+    EXPECT_EQ(view.live_points(), all ? with_depth : close) << "init_all_depth_points " << all;
+  }
 }
 
 TEST_F(TrackerTest, FindsItsPoseInAGivenMapAndTracksOn) {

@@ -3,9 +3,11 @@
 #include <spdlog/spdlog.h>
 
 #include <filesystem>
+#include <optional>
 
 #include "stillpoint/common/error.hpp"
 #include "stillpoint/common/timing.hpp"
+#include "stillpoint/dynamic/fast_activation.hpp"
 
 namespace sp::dyn {
 
@@ -16,6 +18,8 @@ YoloDetector::YoloDetector(const DetectorConfig& cfg) : cfg_(cfg) {
   std::string ext = fs::path(cfg_.model).extension().string();
   std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
   try {
+    std::optional<ScopedFastSigmoid> fast_sigmoid;
+    if (cfg_.fast_sigmoid) fast_sigmoid.emplace();
     if (ext == ".cfg") {
       std::string weights =
           cfg_.weights.empty() ? fs::path(cfg_.model).replace_extension(".weights").string() : cfg_.weights;

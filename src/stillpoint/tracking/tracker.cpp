@@ -23,6 +23,8 @@ TrackerConfig TrackerConfig::from_yaml(const ConfigReader& r) {
   r.read("min_inliers_after_reloc", c.min_inliers_after_reloc, 5, 10000);
   r.read("max_local_keyframes", c.max_local_keyframes, std::size_t{5}, std::size_t{1000});
   r.read("new_points_min", c.new_points_min, 0, 10000);
+  r.read("init_all_depth_points", c.init_all_depth_points);
+  r.read("keyframe_all_depth_points", c.keyframe_all_depth_points);
   r.read("relocalization_candidates", c.relocalization_candidates, std::size_t{1}, std::size_t{1000});
   r.read("relocalization_verify_frames", c.relocalization_verify_frames, 0, 300);
   r.read("relocalization_max_step_m", c.relocalization_max_step_m, 0.001, 10.0);
@@ -176,7 +178,7 @@ TrackOutcome Tracker::track_frame(Frame& frame, const MappingStatus& mapping) {
         // the old frame, so it must not seed a keyframe and points (the next frame will).
         spdlog::debug("frame {}: no keyframe, the map was corrected while it was tracked", frame.index);
       } else {
-        out.new_keyframe = create_keyframe(view, frame, std::move(draft));
+        out.new_keyframe = create_keyframe(view, frame, std::move(draft), config_.keyframe_all_depth_points);
       }
     }
     if (out.new_keyframe != map::kNoKeyframe) refiner_.set_anchor(out.new_keyframe, frame);
@@ -241,7 +243,7 @@ bool Tracker::initialize(map::MapView& view, Frame& frame) {
   if (with_depth < config_.init_min_features) return false;
   frame.T_cw = geo::SE3();
   frame.has_pose = true;
-  reference_ = create_keyframe(view, frame, draft_keyframe(frame));
+  reference_ = create_keyframe(view, frame, draft_keyframe(frame), config_.init_all_depth_points);
   spdlog::info("map initialised at frame {} with {} points", frame.index, view.live_points());
   return true;
 }
@@ -622,7 +624,8 @@ Tracker::KeyframeDraft Tracker::draft_keyframe(const Frame& frame) const {
   return d;
 }
 
-map::KeyframeId Tracker::create_keyframe(map::MapView& view, Frame& frame, KeyframeDraft draft) {
+map::KeyframeId Tracker::create_keyframe(map::MapView& view, Frame& frame, KeyframeDraft draft,
+                                         bool all_depth_points) {
   const map::KeyframeId kid = view.add_keyframe(std::move(draft.keyframe));
   map::Keyframe* stored = view.keyframe(kid);
 
@@ -632,7 +635,7 @@ map::KeyframeId Tracker::create_keyframe(map::MapView& view, Frame& frame, Keyfr
   for (std::size_t i : draft.by_depth) {
     const float d = frame.features.depth[i];
     if (d <= 0) continue;
-    if (d > depth_.close_depth && created >= config_.new_points_min) break;
+    if (!all_depth_points && d > depth_.close_depth && created >= config_.new_points_min) break;
     if (stored->points[i] != map::kNoPoint) continue;
     const auto& kp = frame.features.keypoints[i];
     map::MapPoint p;

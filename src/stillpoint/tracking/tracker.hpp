@@ -34,6 +34,12 @@ struct TrackerConfig {
   int min_inliers_after_reloc = 50;  // ... for one second after relocalisation
   std::size_t max_local_keyframes = 80;
   int new_points_min = 100;  // close-depth points created per keyframe at least
+  // The first keyframe makes a point of every feature with depth, far ones too (ORB-SLAM3's RGB-D
+  // initialisation); false = the keyframe rule (close ones, at least new_points_min).
+  bool init_all_depth_points = true;
+  // Every keyframe makes a point of each unmatched feature with depth (false: close ones first, far
+  // ones only up to new_points_min).
+  bool keyframe_all_depth_points = false;
   std::size_t relocalization_candidates = 20;
   // A relocalised pose is trusted (written, allowed to make keyframes) only once this many following
   // frames tracked from it: each with min_inliers_after_reloc local-map inliers and a pose within the
@@ -142,7 +148,9 @@ class Tracker {
     std::vector<std::size_t> by_depth;  // features, closest first
   };
   [[nodiscard]] KeyframeDraft draft_keyframe(const Frame& frame) const;
-  map::KeyframeId create_keyframe(map::MapView& view, Frame& frame, KeyframeDraft draft);
+  // all_depth_points: every feature with depth makes a point (the first keyframe), not only close ones.
+  map::KeyframeId create_keyframe(map::MapView& view, Frame& frame, KeyframeDraft draft,
+                                  bool all_depth_points = false);
 
   map::Map& map_;
   TrackerConfig config_;

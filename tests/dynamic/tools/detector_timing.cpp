@@ -1,8 +1,11 @@
-// Detector CPU timing (not a test): detector_timing [--runs N] [--threads T] [--image FILE] MODEL...
+// Detector CPU timing (not a test):
+//   detector_timing [--runs N] [--threads T] [--image FILE] [--input PX] [--opencv-sigmoid] MODEL...
 // For each model (.onnx or Darknet .cfg, configured by DetectorConfig::for_model): 3 warm-up runs, then
 // N cv::dnn forward passes alone and N full YoloDetector::detect calls (preprocess + forward + decode +
 // NMS); prints median and p90 of each, with the 1-minute load average before and after (a busy machine
-// makes every figure larger). docs/dynamic.md has the figures and the command.
+// makes every figure larger). --input fits a YOLOX input's long side to PX for the image (as
+// dynamic.detector_input); --opencv-sigmoid times OpenCV's own Sigmoid layer instead of
+// fast_sigmoid. docs/dynamic.md has the figures and the command.
 #include <fmt/format.h>
 
 #include <algorithm>
@@ -13,10 +16,12 @@
 #include <opencv2/dnn.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "stillpoint/dynamic/decoders.hpp"
+#include "stillpoint/dynamic/fast_activation.hpp"
 #include "stillpoint/dynamic/yolo_detector.hpp"
 
 namespace {
@@ -42,6 +47,8 @@ double quantile(std::vector<double> v, double q) {
 int main(int argc, char** argv) {
   int runs = 30;
   int threads = 1;
+  int input = 0;
+  bool fast_sigmoid = true;
   std::string image;
   std::vector<std::string> models;
   for (int i = 1; i < argc; ++i) {
@@ -50,6 +57,10 @@ int main(int argc, char** argv) {
       runs = std::max(1, std::stoi(argv[++i]));
     } else if (a == "--threads" && i + 1 < argc) {
       threads = std::stoi(argv[++i]);
+    } else if (a == "--input" && i + 1 < argc) {
+      input = std::stoi(argv[++i]);
+    } else if (a == "--opencv-sigmoid") {
+      fast_sigmoid = false;
     } else if (a == "--image" && i + 1 < argc) {
       image = argv[++i];
     } else {
@@ -57,7 +68,9 @@ int main(int argc, char** argv) {
     }
   }
   if (models.empty()) {
-    std::fprintf(stderr, "usage: detector_timing [--runs N] [--threads T] [--image FILE] MODEL...\n");
+    std::fprintf(stderr,
+                 "usage: detector_timing [--runs N] [--threads T] [--image FILE] [--input PX] "
+                 "[--opencv-sigmoid] MODEL...\n");
     return 2;
   }
   cv::Mat img = image.empty() ? cv::Mat() : cv::imread(image, cv::IMREAD_COLOR);
@@ -68,16 +81,21 @@ int main(int argc, char** argv) {
     cv::GaussianBlur(img, img, cv::Size(9, 9), 3.0);
   }
   cv::setNumThreads(threads);
-  fmt::print("image {}x{}, {} runs, {} OpenCV thread(s), cv::getNumThreads() = {}\n", img.cols, img.rows,
-             runs, threads, cv::getNumThreads());
+  fmt::print("image {}x{}, {} runs, {} OpenCV thread(s), cv::getNumThreads() = {}, {} sigmoid\n", img.cols,
+             img.rows, runs, threads, cv::getNumThreads(), fast_sigmoid ? "fast" : "OpenCV's");
   fmt::print("{:<34} {:>9} {:>14} {:>14} {:>14} {:>14} {:>11}\n", "model", "input", "forward med",
              "forward p90", "detect med", "detect p90", "load 1m");
   for (const auto& m : models) {
     sp::dyn::DetectorConfig cfg = sp::dyn::DetectorConfig::for_model(m);
     cfg.threads = threads;
+    cfg.fast_sigmoid = fast_sigmoid;
+    if (input > 0 && cfg.decoder == "yolox") cfg.fit_input_to_image(input, img.cols, img.rows);
     const double load_before = load_average();
+    std::optional<sp::dyn::ScopedFastSigmoid> fast_layer;
+    if (fast_sigmoid) fast_layer.emplace();
     cv::dnn::Net net = cfg.decoder == "darknet" ? cv::dnn::readNetFromDarknet(cfg.model, cfg.weights)
                                                 : cv::dnn::readNetFromONNX(cfg.model);
+    fast_layer.reset();
     net.setPreferableBackend(cv::dnn::DNN_BACKEND_OPENCV);
     net.setPreferableTarget(cv::dnn::DNN_TARGET_CPU);
     const auto out_names = net.getUnconnectedOutLayersNames();
