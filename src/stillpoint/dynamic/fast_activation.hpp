@@ -15,7 +15,8 @@ float fast_exp(float x);
 
 // While alive, cv::dnn networks read from files get fast_sigmoid for their "Sigmoid" layers (the
 // layer type is registered with OpenCV's layer factory and withdrawn again on destruction). Keep it
-// around the readNet* call only.
+// around the readNet* call only. OpenCV's layer factory is process-wide: networks loaded on other
+// threads meanwhile get the fast layer too (same results, so harmless).
 class ScopedFastSigmoid {
  public:
   ScopedFastSigmoid();

@@ -30,8 +30,8 @@ struct DynamicConfig {
   // Scheduling niceness of the detector thread (0 = as tracking). 2 keeps tracking within +5 ms of
   // culling-off on 2 cores; 5 and more starve the detector and stale boxes cost accuracy (docs/dynamic.md).
   int detector_nice = 2;
-  // The detector's Sigmoid layers vectorised (dyn::fast_sigmoid; same boxes to 1e-5 px, a YOLOX-nano
-  // forward ~20 % faster); false = OpenCV's own layer. A `detector` section sets its own.
+  // The detector's Sigmoid layers vectorised (dyn::fast_sigmoid; the same boxes, YOLOX-nano forward
+  // 32 vs 40 ms, docs/dynamic.md); false = OpenCV's own layer. A `detector` section sets its own.
   bool detector_fast_sigmoid = true;
   // Where culling removed more than this share of a frame's features, detection runs again away from
   // the moving objects so the static part gets the keypoint budget (a person filling the view of a

@@ -148,9 +148,9 @@ class Tracker {
     std::vector<std::size_t> by_depth;  // features, closest first
   };
   [[nodiscard]] KeyframeDraft draft_keyframe(const Frame& frame) const;
-  // all_depth_points: every feature with depth makes a point (the first keyframe), not only close ones.
+  // all_depth_points: every feature with depth makes a point, not only the close ones.
   map::KeyframeId create_keyframe(map::MapView& view, Frame& frame, KeyframeDraft draft,
-                                  bool all_depth_points = false);
+                                  bool all_depth_points);
 
   map::Map& map_;
   TrackerConfig config_;
