@@ -62,7 +62,12 @@ class FastSigmoidLayer : public cv::dnn::Layer {
 
 float fast_exp(float x) { return exp_approx(x); }
 
-void fast_sigmoid(const float* in, float* out, std::size_t n) {
+// The layer runs in place (in == out): without `ivdep` GCC's run-time alias check sends that case to
+// its scalar copy of the loop, 4x slower. AVX2 gets its own clone (8 lanes, no FMA, so the same
+// results as the SSE2 one), picked at load time.
+__attribute__((target_clones("avx2", "default"))) void fast_sigmoid(const float* in, float* out,
+                                                                    std::size_t n) {
+#pragma GCC ivdep
   for (std::size_t i = 0; i < n; ++i) out[i] = 1.f / (1.f + exp_approx(-in[i]));
 }
 
