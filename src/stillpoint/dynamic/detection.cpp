@@ -169,6 +169,7 @@ DetectorConfig DetectorConfig::from_yaml(const ConfigReader& r) {
   r.read("dynamic_classes", c.dynamic_classes);
   r.read("threads", c.threads, 0, 64);
   r.read("fast_sigmoid", c.fast_sigmoid);
+  r.read("fast_slice", c.fast_slice);
   for (const auto& name : c.dynamic_classes) {
     if (class_index(c.names(), name) < 0) r.fail("dynamic_classes", "unknown class name '" + name + "'");
   }

@@ -51,6 +51,9 @@ struct DetectorConfig {
   // The network's Sigmoid layers use fast_sigmoid (dynamic/fast_activation.hpp: vectorised, relative
   // error < 2e-7; YOLOX-nano forward 32 vs 40 ms, docs/dynamic.md); false = OpenCV's own layer.
   bool fast_sigmoid = true;
+  // The network's Slice layers copy by strides (dynamic/fast_slice.hpp; same output; YOLOX-nano's
+  // input slicing ~5 ms -> < 1 ms, docs/dynamic.md); false = OpenCV's own layer.
+  bool fast_slice = true;
 
   // Keys as the field names; `model` is resolved relative to the YAML file's folder.
   static DetectorConfig from_yaml(const ConfigReader& r);

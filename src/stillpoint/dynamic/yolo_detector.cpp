@@ -8,6 +8,7 @@
 #include "stillpoint/common/error.hpp"
 #include "stillpoint/common/timing.hpp"
 #include "stillpoint/dynamic/fast_activation.hpp"
+#include "stillpoint/dynamic/fast_slice.hpp"
 
 namespace sp::dyn {
 
@@ -20,6 +21,8 @@ YoloDetector::YoloDetector(const DetectorConfig& cfg) : cfg_(cfg) {
   try {
     std::optional<ScopedFastSigmoid> fast_sigmoid;
     if (cfg_.fast_sigmoid) fast_sigmoid.emplace();
+    std::optional<ScopedFastSlice> fast_slice;
+    if (cfg_.fast_slice) fast_slice.emplace();
     if (ext == ".cfg") {
       std::string weights =
           cfg_.weights.empty() ? fs::path(cfg_.model).replace_extension(".weights").string() : cfg_.weights;

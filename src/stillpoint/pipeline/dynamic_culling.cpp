@@ -18,6 +18,7 @@ DynamicConfig DynamicConfig::from_yaml(const ConfigReader& r) {
     r.fail("detector_input", "must be 0 (the model's own input) or at least 32 px");
   r.read("detector_nice", c.detector_nice, 0, 19);
   r.read("detector_fast_sigmoid", c.detector_fast_sigmoid);
+  r.read("detector_fast_slice", c.detector_fast_slice);
   r.read("refill_share", c.refill_share, 0.0, 1.0);
   r.read("refill_budget", c.refill_budget, 0.0, 10.0);
   r.read("refill_reuse", c.refill_reuse);
@@ -75,6 +76,7 @@ DynamicCulling::DynamicCulling(const DynamicConfig& config, const geo::CameraInt
     if (!config.detector_configured) {
       dc.threads = config.detector_threads;
       dc.fast_sigmoid = config.detector_fast_sigmoid;
+      dc.fast_slice = config.detector_fast_slice;
       if (config.detector_input > 0 && dc.decoder == "yolox")
         dc.fit_input_to_image(config.detector_input, camera.width, camera.height);
     }

@@ -33,6 +33,9 @@ struct DynamicConfig {
   // The detector's Sigmoid layers vectorised (dyn::fast_sigmoid; the same boxes, YOLOX-nano forward
   // 32 vs 40 ms, docs/dynamic.md); false = OpenCV's own layer. A `detector` section sets its own.
   bool detector_fast_sigmoid = true;
+  // The detector's Slice layers as strided copies (dyn::ScopedFastSlice; the same boxes, YOLOX-nano's
+  // input slicing ~5 ms -> < 1 ms, docs/dynamic.md); false = OpenCV's own layer.
+  bool detector_fast_slice = true;
   // Where culling removed more than this share of a frame's features, detection runs again away from
   // the moving objects so the static part gets the keypoint budget (a person filling the view of a
   // bare room left too few features to start the map). 0: never.

@@ -1,11 +1,13 @@
 // Detector CPU timing (not a test):
-//   detector_timing [--runs N] [--threads T] [--image FILE] [--input PX] [--opencv-sigmoid] MODEL...
+//   detector_timing [--runs N] [--threads T] [--image FILE] [--input PX] [--opencv-sigmoid] [--opencv-slice]
+//   MODEL...
 // For each model (.onnx or Darknet .cfg, configured by DetectorConfig::for_model): 3 warm-up runs, then
 // N cv::dnn forward passes alone and N full YoloDetector::detect calls (preprocess + forward + decode +
 // NMS); prints median and p90 of each, with the 1-minute load average before and after (a busy machine
 // makes every figure larger). --input fits a YOLOX input's long side to PX for the image (as
 // dynamic.detector_input); --opencv-sigmoid times OpenCV's own Sigmoid layer instead of
-// fast_sigmoid. docs/dynamic.md has the figures and the command.
+// fast_sigmoid, --opencv-slice OpenCV's own Slice layer instead of the strided copy. docs/dynamic.md has the
+// figures and the command.
 #include <fmt/format.h>
 
 #include <algorithm>
@@ -22,6 +24,7 @@
 
 #include "stillpoint/dynamic/decoders.hpp"
 #include "stillpoint/dynamic/fast_activation.hpp"
+#include "stillpoint/dynamic/fast_slice.hpp"
 #include "stillpoint/dynamic/yolo_detector.hpp"
 
 namespace {
@@ -49,6 +52,7 @@ int main(int argc, char** argv) {
   int threads = 1;
   int input = 0;
   bool fast_sigmoid = true;
+  bool fast_slice = true;
   std::string image;
   std::vector<std::string> models;
   for (int i = 1; i < argc; ++i) {
@@ -61,6 +65,8 @@ int main(int argc, char** argv) {
       input = std::stoi(argv[++i]);
     } else if (a == "--opencv-sigmoid") {
       fast_sigmoid = false;
+    } else if (a == "--opencv-slice") {
+      fast_slice = false;
     } else if (a == "--image" && i + 1 < argc) {
       image = argv[++i];
     } else {
@@ -70,7 +76,7 @@ int main(int argc, char** argv) {
   if (models.empty()) {
     std::fprintf(stderr,
                  "usage: detector_timing [--runs N] [--threads T] [--image FILE] [--input PX] "
-                 "[--opencv-sigmoid] MODEL...\n");
+                 "[--opencv-sigmoid] [--opencv-slice] MODEL...\n");
     return 2;
   }
   cv::Mat img = image.empty() ? cv::Mat() : cv::imread(image, cv::IMREAD_COLOR);
@@ -81,21 +87,26 @@ int main(int argc, char** argv) {
     cv::GaussianBlur(img, img, cv::Size(9, 9), 3.0);
   }
   cv::setNumThreads(threads);
-  fmt::print("image {}x{}, {} runs, {} OpenCV thread(s), cv::getNumThreads() = {}, {} sigmoid\n", img.cols,
-             img.rows, runs, threads, cv::getNumThreads(), fast_sigmoid ? "fast" : "OpenCV's");
+  fmt::print("image {}x{}, {} runs, {} OpenCV thread(s), cv::getNumThreads() = {}, {} sigmoid, {} slice\n",
+             img.cols, img.rows, runs, threads, cv::getNumThreads(), fast_sigmoid ? "fast" : "OpenCV's",
+             fast_slice ? "strided-copy" : "OpenCV's");
   fmt::print("{:<34} {:>9} {:>14} {:>14} {:>14} {:>14} {:>11}\n", "model", "input", "forward med",
              "forward p90", "detect med", "detect p90", "load 1m");
   for (const auto& m : models) {
     sp::dyn::DetectorConfig cfg = sp::dyn::DetectorConfig::for_model(m);
     cfg.threads = threads;
     cfg.fast_sigmoid = fast_sigmoid;
+    cfg.fast_slice = fast_slice;
     if (input > 0 && cfg.decoder == "yolox") cfg.fit_input_to_image(input, img.cols, img.rows);
     const double load_before = load_average();
     std::optional<sp::dyn::ScopedFastSigmoid> fast_layer;
     if (fast_sigmoid) fast_layer.emplace();
+    std::optional<sp::dyn::ScopedFastSlice> slice_layer;
+    if (fast_slice) slice_layer.emplace();
     cv::dnn::Net net = cfg.decoder == "darknet" ? cv::dnn::readNetFromDarknet(cfg.model, cfg.weights)
                                                 : cv::dnn::readNetFromONNX(cfg.model);
     fast_layer.reset();
+    slice_layer.reset();
     net.setPreferableBackend(cv::dnn::DNN_BACKEND_OPENCV);
     net.setPreferableTarget(cv::dnn::DNN_TARGET_CPU);
     const auto out_names = net.getUnconnectedOutLayersNames();
