@@ -53,6 +53,7 @@ int match_last_frame(const LocalMapSnapshot& map, Frame& cur, const Frame& last,
   // Forward/backward camera motion shifts the expected pyramid level (ORB-SLAM's monocular/RGB-D trick).
   const bool forward = t_cl.z() > 0.05;
   const bool backward = t_cl.z() < -0.05;
+  std::vector<std::size_t> candidates;  // reused: one allocation per call, not per point
   for (std::size_t i = 0; i < last.points.size(); ++i) {
     if (last.points[i] == map::kNoPoint || last.outlier[i]) continue;
     const LocalMapSnapshot::Point* p = map.live_point(last.points[i]);
@@ -62,13 +63,12 @@ int match_last_frame(const LocalMapSnapshot& map, Frame& cur, const Frame& last,
     if (!project_point(cur.T_cw, p->position, ctx.camera, uv, z)) continue;
     const int last_level = last.features.keypoints[i].octave;
     const double r = radius * ctx.pyramid.scale[static_cast<std::size_t>(last_level)];
-    std::vector<std::size_t> candidates;
     if (forward) {
-      candidates = cur.grid.in_area(uv.x(), uv.y(), static_cast<float>(r), last_level);
+      cur.grid.in_area(uv.x(), uv.y(), static_cast<float>(r), candidates, last_level);
     } else if (backward) {
-      candidates = cur.grid.in_area(uv.x(), uv.y(), static_cast<float>(r), 0, last_level);
+      cur.grid.in_area(uv.x(), uv.y(), static_cast<float>(r), candidates, 0, last_level);
     } else {
-      candidates = cur.grid.in_area(uv.x(), uv.y(), static_cast<float>(r), last_level - 1, last_level + 1);
+      cur.grid.in_area(uv.x(), uv.y(), static_cast<float>(r), candidates, last_level - 1, last_level + 1);
     }
     int best = 256;
     int best_idx = -1;
@@ -99,6 +99,7 @@ int match_local_points(const LocalMapSnapshot& map, Frame& cur, const std::vecto
                        double radius_factor, const MatchContext& ctx, PointCounterUpdates& counters) {
   int matches = 0;
   const Eigen::Vector3d center = cur.camera_center();
+  std::vector<std::size_t> candidates;  // reused across points
   for (std::size_t k = 0; k < local_points.size(); ++k) {
     const LocalMapSnapshot::Point* p = map.live_point(local_points[k]);
     // A point replaced by another was bad when copied: skipped, not followed (its slot moved on).
@@ -116,7 +117,7 @@ int match_local_points(const LocalMapSnapshot& map, Frame& cur, const std::vecto
     const double cos_view = ray.dot(p->normal) / dist;
     const double r =
         radius_factor * (cos_view > 0.998 ? 2.5 : 4.0) * ctx.pyramid.scale[static_cast<std::size_t>(level)];
-    const auto candidates = cur.grid.in_area(uv.x(), uv.y(), static_cast<float>(r), level - 1, level);
+    cur.grid.in_area(uv.x(), uv.y(), static_cast<float>(r), candidates, level - 1, level);
     int best = 256, second = 256, best_level = -1, second_level = -1, best_idx = -1;
     for (const std::size_t ci : candidates) {
       const int c = static_cast<int>(ci);
