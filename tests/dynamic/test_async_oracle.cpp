@@ -43,6 +43,28 @@ TEST(AsyncDetector, SyncModeDetectsInTheCallersThread) {
   EXPECT_EQ(*fake.calls, 1);
 }
 
+TEST(AsyncDetector, SyncLatencyShowsEachDetectionThatManyFramesLateWithoutWaiting) {
+  SlowFake fake{0ms};
+  AsyncDetector a(fake, AsyncDetector::Mode::kSync);
+  a.set_sync_latency(4);
+  const auto t0 = std::chrono::steady_clock::now();
+  // Detect every 3rd frame, as the system does; query every frame with the stale-wait rule on.
+  for (std::size_t f = 0; f < 20; ++f) {
+    if (f % 3 == 0) a.submit(f, static_cast<double>(f), frame(static_cast<int>(f)));
+    const auto fresh = a.wait_for_fresh(f, 50ms, 2, 200ms);
+    // Newest detection whose frame is at least 4 back: frame f - 4 rounded down to a multiple of 3.
+    if (f < 4) {
+      EXPECT_FALSE(fresh.detections.has_value()) << "frame " << f;
+    } else {
+      ASSERT_TRUE(fresh.detections.has_value()) << "frame " << f;
+      EXPECT_EQ(fresh.detections->frame_index, (f - 4) / 3 * 3) << "frame " << f;
+    }
+  }
+  // Nothing ran in the background, so neither the budget nor the stale wait was spent waiting.
+  EXPECT_LT(std::chrono::steady_clock::now() - t0, 500ms);
+  EXPECT_EQ(*fake.calls, 7);
+}
+
 TEST(AsyncDetector, WaitForGetsTheFrameAndKeepsOnlyTheNewestPending) {
   SlowFake fake{30ms};
   AsyncDetector a(fake, AsyncDetector::Mode::kAsync);

@@ -34,7 +34,12 @@ void AsyncDetector::submit(std::size_t frame_index, double stamp, const cv::Mat&
     Detections d = detect_(bgr);
     d.frame_index = frame_index;
     d.stamp = stamp;
-    store(std::move(d));
+    if (sync_latency_ > 0) {
+      std::lock_guard lock(mutex_);
+      delayed_.push_back(std::move(d));
+    } else {
+      store(std::move(d));
+    }
     return;
   }
   if (queue_.push_drop_oldest(Job{frame_index, stamp, bgr.clone()})) {
@@ -50,6 +55,20 @@ std::optional<Detections> AsyncDetector::latest() const {
 
 std::optional<Detections> AsyncDetector::wait_for(std::size_t frame_index, std::chrono::milliseconds budget) {
   rethrow_worker_error();
+  if (mode_ == Mode::kSync) {
+    // Nothing runs in the background to wait for: what is finished (and due) is all there is.
+    std::vector<Detections> due;
+    {
+      std::lock_guard lock(mutex_);
+      while (!delayed_.empty() && delayed_.front().frame_index + sync_latency_ <= frame_index) {
+        due.push_back(std::move(delayed_.front()));
+        delayed_.pop_front();
+      }
+    }
+    for (auto& d : due) store(std::move(d));
+    std::lock_guard lock(mutex_);
+    return latest_;
+  }
   std::unique_lock lock(mutex_);
   done_.wait_for(lock, budget,
                  [&] { return stopped_ || error_ || (latest_ && latest_->frame_index >= frame_index); });
@@ -80,6 +99,11 @@ void AsyncDetector::stop() {
   }
   if (worker_.joinable()) worker_.join();
   done_.notify_all();
+}
+
+void AsyncDetector::set_sync_latency(std::size_t frames) {
+  std::lock_guard lock(mutex_);
+  sync_latency_ = frames;
 }
 
 std::size_t AsyncDetector::dropped() const {

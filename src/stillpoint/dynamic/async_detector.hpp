@@ -3,6 +3,7 @@
 // the network longer than it chooses to (wait_for's budget).
 #include <chrono>
 #include <condition_variable>
+#include <deque>
 #include <exception>
 #include <functional>
 #include <memory>
@@ -57,6 +58,11 @@ class AsyncDetector {
   // Idempotent; the destructor calls it.
   void stop();
 
+  // kSync only: a detection of frame i becomes visible from frame i + frames on (wait_for* with that
+  // frame index), as if the network had taken that long: deterministic runs that see boxes as late as
+  // a threaded run on a busy CPU does. 0 (default): at once.
+  void set_sync_latency(std::size_t frames);
+
   // Frames submitted but replaced before the worker took them.
   [[nodiscard]] std::size_t dropped() const;
 
@@ -79,6 +85,8 @@ class AsyncDetector {
   std::exception_ptr error_;
   std::size_t dropped_ = 0;
   bool stopped_ = false;
+  std::size_t sync_latency_ = 0;
+  std::deque<Detections> delayed_;  // kSync with latency: finished, not visible yet (submission order)
   std::thread worker_;
 };
 

@@ -24,6 +24,7 @@ DynamicConfig DynamicConfig::from_yaml(const ConfigReader& r) {
   r.read("refill_reuse", c.refill_reuse);
   r.read("max_detection_age", c.max_detection_age, 0, 1000);
   r.read("stale_wait_ms", c.stale_wait_ms, 0.0, 10000.0);
+  r.read("deterministic_detector_latency", c.deterministic_detector_latency, 0, 100);
   if (r.has("detector")) {
     c.detector = dyn::DetectorConfig::from_yaml(r.section("detector"));
     c.detector_configured = true;
@@ -83,6 +84,8 @@ DynamicCulling::DynamicCulling(const DynamicConfig& config, const geo::CameraInt
     detector_ = std::make_unique<dyn::AsyncDetector>(
         dc, deterministic ? dyn::AsyncDetector::Mode::kSync : dyn::AsyncDetector::Mode::kAsync,
         config.detector_nice);
+    if (deterministic)
+      detector_->set_sync_latency(static_cast<std::size_t>(config.deterministic_detector_latency));
   }
   if (mode_ == "oracle") {
     if (!boxes_file || !std::filesystem::exists(*boxes_file)) {

@@ -50,6 +50,10 @@ struct DynamicConfig {
   // behind (a loaded CPU) makes detections this old. 0: never wait.
   int max_detection_age = 4;
   double stale_wait_ms = 200.0;
+  // --deterministic only: a detection is seen this many frames after its frame (0: at once, as a
+  // synchronous detector). Reproduces, repeatably, the late boxes of a threaded run on a busy CPU
+  // (there: 1 to max_detection_age + 2 frames), for tests and for diagnosing failures seen threaded.
+  int deterministic_detector_latency = 0;
   dyn::DetectorConfig detector;  // used as given when the file sets `detector`, else from the model
   bool detector_configured = false;
   dyn::MotionCheckConfig motion;
