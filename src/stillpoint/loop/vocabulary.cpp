@@ -14,6 +14,7 @@
 #include <unordered_set>
 
 #include "stillpoint/common/error.hpp"
+#include "stillpoint/features/descriptor.hpp"
 
 namespace sp::loop {
 namespace {
@@ -182,17 +183,7 @@ std::vector<Cluster> kmeans(const std::vector<std::uint8_t>& all, const std::vec
 
 }  // namespace
 
-int hamming256(const std::uint8_t* a, const std::uint8_t* b) {
-  int d = 0;
-  for (int i = 0; i < kDescriptorBytes; i += 8) {
-    std::uint64_t x = 0;
-    std::uint64_t y = 0;
-    std::memcpy(&x, a + i, 8);
-    std::memcpy(&y, b + i, 8);
-    d += std::popcount(x ^ y);
-  }
-  return d;
-}
+int hamming256(const std::uint8_t* a, const std::uint8_t* b) { return feat::hamming_distance(a, b); }
 
 VocabularyParams VocabularyParams::from_yaml(const sp::ConfigReader& r) {
   VocabularyParams p;

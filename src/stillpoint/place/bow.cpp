@@ -11,6 +11,7 @@
 #include <random>
 
 #include "stillpoint/common/error.hpp"
+#include "stillpoint/features/descriptor.hpp"
 
 namespace sp::place {
 
@@ -18,16 +19,7 @@ namespace {
 
 constexpr int kBytes = 32;
 
-int hamming(const std::uint8_t* a, const std::uint8_t* b) {
-  int d = 0;
-  for (int i = 0; i < kBytes; i += 8) {
-    std::uint64_t x, y;
-    std::memcpy(&x, a + i, 8);
-    std::memcpy(&y, b + i, 8);
-    d += std::popcount(x ^ y);
-  }
-  return d;
-}
+int hamming(const std::uint8_t* a, const std::uint8_t* b) { return feat::hamming_distance(a, b); }
 
 int nearest(const cv::Mat& words, const std::uint8_t* d) {
   int best = 0, best_d = 1 << 30;
