@@ -6,6 +6,7 @@ PACKAGES=(
   libopencv-dev libeigen3-dev libceres-dev libtorch-dev
   libyaml-cpp-dev libspdlog-dev libfmt-dev libcli11-dev nlohmann-json3-dev
   libgtest-dev libgmock-dev libbenchmark-dev libopenni2-dev
+  libjpeg-dev  # colour JPEGs decoded straight to BGR (src/stillpoint/io/jpeg_reader.cpp)
   chromium nodejs  # report: headless-browser test; npm fetches three.js at build time
   python3-opencv python3-numpy ccache  # scripts/room_suite.sh renders with dynsynth; ccache speeds rebuilds
   python3-onnx  # scripts/make_yolov7_tiny_onnx.py (YOLOv7-tiny graph with random weights, tests/dynamic)

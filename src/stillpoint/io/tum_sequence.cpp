@@ -6,6 +6,7 @@
 
 #include "stillpoint/common/error.hpp"
 #include "stillpoint/io/association.hpp"
+#include "stillpoint/io/jpeg_reader.hpp"
 #include "stillpoint/io/tum_text.hpp"
 
 namespace sp::io {
@@ -79,7 +80,7 @@ std::optional<FrameData> TumSequence::load(const Entry& e) const {
   f.stamp = e.rgb_stamp;
   f.depth_stamp = e.depth_stamp;
   f.rgb_path = e.rgb.string();
-  f.bgr = cv::imread(e.rgb.string(), cv::IMREAD_COLOR);
+  f.bgr = read_color_image(e.rgb.string());
   if (f.bgr.empty()) {
     spdlog::warn("skipping frame {}: cannot read colour image {}", e.index, e.rgb.string());
     return std::nullopt;
