@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "../support/shared_data.hpp"
+#include "detector_agreement.hpp"
 #include "stillpoint/dynamic/fast_slice.hpp"
 #include "stillpoint/dynamic/yolo_detector.hpp"
 
@@ -96,24 +97,11 @@ TEST(FastSlice, YoloxNanoUsesItAndGivesTheSameBoxes) {
   const std::filesystem::path model = SP_SHARED_DIR "/models/yolox_nano.onnx";
   const std::filesystem::path people = SP_SHARED_DIR "/data/people";
   SP_REQUIRE_SHARED(model, people);
-  DetectorConfig fast = DetectorConfig::for_model(model);
-  fast.fit_input_to_image(320, 640, 480);
+  const DetectorConfig fast = testing::yolox_nano_as_run(model);
   DetectorConfig ref = fast;
-  fast.fast_slice = true;
   ref.fast_slice = false;
-  YoloDetector det_fast(fast), det_ref(ref);
-  int boxes = 0;
-  for (const char* file : {"yolov5_bus.jpg", "yolov5_zidane.jpg", "darknet_person.jpg"}) {
-    const cv::Mat img = cv::imread((people / file).string(), cv::IMREAD_COLOR);
-    ASSERT_FALSE(img.empty()) << file;
-    const Detections a = det_fast.detect(img), b = det_ref.detect(img);
-    ASSERT_EQ(a.items.size(), b.items.size()) << file;
-    for (std::size_t i = 0; i < a.items.size(); ++i) {
-      EXPECT_EQ(a.items[i].box, b.items[i].box) << file;
-      EXPECT_EQ(a.items[i].score, b.items[i].score) << file;
-    }
-    boxes += static_cast<int>(a.items.size());
-  }
+  const int boxes = testing::compare_detections(
+      fast, ref, people, {"yolov5_bus.jpg", "yolov5_zidane.jpg", "darknet_person.jpg"}, 0.0, 0.0);
   EXPECT_GE(boxes, 3);
   // The comparison above is not vacuous: a network read with the layer in place has its eight input
   // slices as strided copies.
