@@ -37,13 +37,15 @@ std::string read_file(const std::filesystem::path& p) {
 
 RunResult run(const std::string& sequence, const std::string& out_name, const std::string& dynamic_mode,
               bool deterministic = true, const std::atomic<bool>* stop = nullptr,
-              const std::filesystem::path& detector_model = {}, int detector_latency = 0) {
+              const std::filesystem::path& detector_model = {}, int detector_latency = 0,
+              int mapping_latency = 0) {
   const auto dir = kData / sequence;
   io::TumSequence source(dir);
   SystemConfig config = SystemConfig::load(kConfig);
   config.dynamic.mode = dynamic_mode;
   if (!detector_model.empty()) config.dynamic.model = detector_model.string();
   config.dynamic.deterministic_detector_latency = detector_latency;
+  config.pipeline.deterministic_mapping_latency = mapping_latency;
   RunOptions options;
   options.out_dir = scratch(out_name);
   options.deterministic = deterministic;
@@ -118,6 +120,21 @@ TEST_F(EndToEnd, WalkingSequenceWithLateDetectionsStaysAccurate) {
   const auto e2e = std::filesystem::path(SP_TEST_TMP_DIR) / "e2e";
   EXPECT_NE(read_file(e2e / "walking_late_boxes" / "trajectory.txt"),
             read_file(e2e / "walking_on_time_boxes" / "trajectory.txt"));
+}
+
+// Keyframes reaching local mapping 4 frames late, with tracking told mapping is busy meanwhile (a
+// lagging mapper on a loaded CPU): tracking must not depend on the mapper keeping up. Same bounds.
+TEST_F(EndToEnd, WalkingSequenceWithLaggingMappingStaysAccurate) {
+  const RunResult r = run("office_a_walking_xyz_150", "walking_mapping_lag", "flow", true, nullptr, {}, 0, 4);
+  ASSERT_TRUE(r.completed);
+  EXPECT_EQ(r.stats["lost_frames"].get<int>(), 0);
+  ASSERT_TRUE(r.ate_rmse.has_value());
+  EXPECT_LT(*r.ate_rmse, 0.015);
+  const RunResult on_time = run("office_a_walking_xyz_150", "walking_mapping_on_time", "flow");
+  ASSERT_TRUE(on_time.completed);
+  const auto e2e = std::filesystem::path(SP_TEST_TMP_DIR) / "e2e";
+  EXPECT_NE(read_file(e2e / "walking_mapping_lag" / "trajectory.txt"),
+            read_file(e2e / "walking_mapping_on_time" / "trajectory.txt"));
 }
 
 TEST_F(EndToEnd, DeterministicModeGivesIdenticalTrajectories) {

@@ -328,7 +328,13 @@ FrameReport SlamSystem::process(const io::FrameData& data) {
   culled_total_ += frame.culled;
 
   watch.restart();
-  const track::MappingStatus mapping{mapping_stage_->idle(), mapping_stage_->queued()};
+  const auto latency = static_cast<std::size_t>(config_.pipeline.deterministic_mapping_latency);
+  while (!delayed_keyframes_.empty() && delayed_keyframes_.front().first <= data.index) {
+    mapping_stage_->submit(delayed_keyframes_.front().second);
+    delayed_keyframes_.pop_front();
+  }
+  const track::MappingStatus mapping{mapping_stage_->idle() && delayed_keyframes_.empty(),
+                                     mapping_stage_->queued() + delayed_keyframes_.size()};
   const track::TrackOutcome outcome = tracker_.track(frame, mapping);
   times_.add("track", watch.elapsed_ms());
   times_.add("track_lock", tracker_.last_lock().held_ms);
@@ -341,7 +347,11 @@ FrameReport SlamSystem::process(const io::FrameData& data) {
   if (outcome.new_keyframe != map::kNoKeyframe) {
     ++keyframes_created_;
     if (!mapping.idle) mapping_stage_->interrupt_ba();
-    mapping_stage_->submit(outcome.new_keyframe);
+    if (deterministic_ && latency > 0) {
+      delayed_keyframes_.emplace_back(data.index + latency, outcome.new_keyframe);
+    } else {
+      mapping_stage_->submit(outcome.new_keyframe);
+    }
     artifacts_.on_keyframe(outcome.new_keyframe, data);
   }
   times_.add("frame", frame_watch.elapsed_ms());
@@ -361,6 +371,8 @@ FrameReport SlamSystem::process(const io::FrameData& data) {
 void SlamSystem::finish() {
   if (finished_) return;
   finished_ = true;
+  for (const auto& [due, kf] : delayed_keyframes_) mapping_stage_->submit(kf);
+  delayed_keyframes_.clear();
   mapping_stage_->stop();  // drains into the loop stage
   if (loop_stage_) loop_stage_->stop();
   if (closer_) closer_->flush();

@@ -2,6 +2,7 @@
 // The System wires the stages: front end (features, dynamic culling) and tracking on the caller's
 // thread, local mapping and loop closing on their own threads, joined by bounded queues. With
 // `deterministic` every stage runs in lock-step on the caller's thread.
+#include <deque>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <vector>
@@ -108,6 +109,8 @@ class SlamSystem {
   std::size_t refilled_total_ = 0;       // features added by FrontEnd::refill
   std::size_t ego_motion_rejected_ = 0;  // frames whose camera-motion fit the motion check rejected
   std::size_t keyframes_created_ = 0;
+  // Deterministic mapping latency: keyframes held back, with the frame index from which they go on.
+  std::deque<std::pair<std::size_t, map::KeyframeId>> delayed_keyframes_;
   bool finished_ = false;
   double vocabulary_load_ms_ = 0;
   double place_model_load_ms_ = 0;

@@ -34,6 +34,7 @@ PipelineConfig PipelineConfig::from_yaml(const ConfigReader& r) {
   r.read("loop_queue", c.loop_queue, std::size_t{1}, std::size_t{1000});
   r.read("mapping_nice", c.mapping_nice, 0, 19);
   r.read("loop_nice", c.loop_nice, 0, 19);
+  r.read("deterministic_mapping_latency", c.deterministic_mapping_latency, 0, 1000);
   return c;
 }
 

@@ -20,6 +20,9 @@ struct PipelineConfig {
   std::size_t loop_queue = 16;    // keyframes waiting for loop closing
   int mapping_nice = 0;           // niceness of the local-mapping thread (tracking keeps 0)
   int loop_nice = 0;              // niceness of the loop-closing thread
+  // --deterministic only: a keyframe reaches local mapping this many frames after it was made, and
+  // tracking sees mapping busy meanwhile, as on a threaded run whose mapper lags (0: at once).
+  int deterministic_mapping_latency = 0;
   static PipelineConfig from_yaml(const ConfigReader& r);
 };
 
