@@ -56,17 +56,13 @@ std::optional<Detections> AsyncDetector::latest() const {
 std::optional<Detections> AsyncDetector::wait_for(std::size_t frame_index, std::chrono::milliseconds budget) {
   rethrow_worker_error();
   if (mode_ == Mode::kSync) {
-    // Nothing runs in the background to wait for: what is finished (and due) is all there is.
-    std::vector<Detections> due;
-    {
-      std::lock_guard lock(mutex_);
-      while (!delayed_.empty() && delayed_.front().frame_index + sync_latency_ <= frame_index) {
-        due.push_back(std::move(delayed_.front()));
-        delayed_.pop_front();
-      }
-    }
-    for (auto& d : due) store(std::move(d));
+    // Nothing runs in the background to wait for: what is finished (and due) is all there is. Delayed
+    // results are in submission order, each newer than latest_.
     std::lock_guard lock(mutex_);
+    while (!delayed_.empty() && delayed_.front().frame_index + sync_latency_ <= frame_index) {
+      latest_ = std::move(delayed_.front());
+      delayed_.pop_front();
+    }
     return latest_;
   }
   std::unique_lock lock(mutex_);

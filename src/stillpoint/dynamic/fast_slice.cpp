@@ -68,12 +68,11 @@ class FastSliceLayer : public cv::dnn::Layer {
     const cv::Mat& in = inputs[0];
     cv::Mat& out = outputs[0];
     CV_Assert(in.type() == CV_32F && out.type() == CV_32F && in.dims == out.dims);
-    std::vector<int> start(static_cast<std::size_t>(in.dims), 0), step(static_cast<std::size_t>(in.dims), 1);
-    for (std::size_t a = 0; a < begin_.size() && a < start.size(); ++a) {
+    CV_Assert(begin_.size() <= static_cast<std::size_t>(in.dims));  // OpenCV's shape rule, checked again
+    std::vector<int> start(begin_.size());  // strided_slice fills the axes after these with 0 / 1
+    for (std::size_t a = 0; a < start.size(); ++a)
       start[a] = normalised_start(begin_[a], in.size[static_cast<int>(a)]);
-      step[a] = step_[a];
-    }
-    strided_slice(in, start, step, out);
+    strided_slice(in, start, step_, out);
   }
 
  private:

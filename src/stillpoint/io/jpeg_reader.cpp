@@ -14,9 +14,16 @@
 
 namespace sp::io {
 
-#if defined(SP_HAVE_LIBJPEG) && defined(JCS_EXTENSIONS)
 namespace {
 
+// The file's bytes (empty when unreadable): read once, for the direct decoder and the fallback alike.
+std::vector<unsigned char> read_bytes(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return {};
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+#if defined(SP_HAVE_LIBJPEG) && defined(JCS_EXTENSIONS)
 struct ErrorManager {
   jpeg_error_mgr pub;
   std::jmp_buf jump;
@@ -64,21 +71,19 @@ bool decode(const unsigned char* data, std::size_t size, cv::Mat& out) {
   return true;
 }
 
-}  // namespace
-
-cv::Mat decode_jpeg_bgr(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return {};
-  const std::vector<unsigned char> bytes((std::istreambuf_iterator<char>(in)),
-                                         std::istreambuf_iterator<char>());
+cv::Mat decode_bytes(const std::vector<unsigned char>& bytes) {
   if (bytes.size() < 4 || bytes[0] != 0xFF || bytes[1] != 0xD8) return {};  // no JPEG start-of-image
   cv::Mat out;
   if (!decode(bytes.data(), bytes.size(), out)) return {};
   return out;
 }
 #else
-cv::Mat decode_jpeg_bgr(const std::string& /*path*/) { return {}; }
+cv::Mat decode_bytes(const std::vector<unsigned char>& /*bytes*/) { return {}; }
 #endif
+
+}  // namespace
+
+cv::Mat decode_jpeg_bgr(const std::string& path) { return decode_bytes(read_bytes(path)); }
 
 bool direct_jpeg_decoding() {
 #if defined(SP_HAVE_LIBJPEG) && defined(JCS_EXTENSIONS)
@@ -89,8 +94,10 @@ bool direct_jpeg_decoding() {
 }
 
 cv::Mat read_color_image(const std::string& path) {
-  cv::Mat img = decode_jpeg_bgr(path);
-  if (img.empty()) img = cv::imread(path, cv::IMREAD_COLOR);
+  const std::vector<unsigned char> bytes = read_bytes(path);
+  if (bytes.empty()) return {};
+  cv::Mat img = decode_bytes(bytes);
+  if (img.empty()) img = cv::imdecode(bytes, cv::IMREAD_COLOR);
   return img;
 }
 

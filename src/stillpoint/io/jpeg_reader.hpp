@@ -9,8 +9,8 @@ namespace sp::io {
 
 // The image as cv::imread(path, cv::IMREAD_COLOR) gives it. Three-component baseline/progressive JPEGs
 // without EXIF data are decoded here; anything else (other formats, grey or CMYK JPEGs, EXIF
-// orientation, libjpeg built without BGR output, a corrupt file) goes to cv::imread. Empty when
-// unreadable, as cv::imread.
+// orientation, libjpeg built without BGR output, a corrupt file) goes to cv::imdecode of the same
+// bytes (the file is read once). Empty when unreadable, as cv::imread.
 cv::Mat read_color_image(const std::string& path);
 
 // Whether this build decodes JPEGs itself (libjpeg-turbo found at build time).

@@ -17,14 +17,12 @@ namespace sp::place {
 
 namespace {
 
-constexpr int kBytes = 32;
-
-int hamming(const std::uint8_t* a, const std::uint8_t* b) { return feat::hamming_distance(a, b); }
+constexpr int kBytes = feat::kDescriptorBytes;
 
 int nearest(const cv::Mat& words, const std::uint8_t* d) {
   int best = 0, best_d = 1 << 30;
   for (int k = 0; k < words.rows; ++k) {
-    const int h = hamming(words.ptr<std::uint8_t>(k), d);
+    const int h = feat::hamming_distance(words.ptr<std::uint8_t>(k), d);
     if (h < best_d) best_d = h, best = k;
   }
   return best;
