@@ -48,6 +48,19 @@ TEST(PoseGuard, RulesFollowTheThresholds) {
   EXPECT_FALSE(PoseGuardRules(c).is_jump({1.0, 10.0}));
 }
 
+TEST(PoseGuard, JumpedFrameMakesAKeyframeOnlyWhenTrackingRunsOut) {
+  PoseGuardConfig c;
+  c.keyframe_below_reference_share = 0.25;
+  const PoseGuardRules g(c);
+  // Below a quarter of the reference keyframe's tracked points the map needs the keyframe anyway.
+  EXPECT_TRUE(g.keyframe_despite_jump(74, 300));
+  EXPECT_FALSE(g.keyframe_despite_jump(75, 300));
+  EXPECT_FALSE(g.keyframe_despite_jump(250, 300));
+  EXPECT_FALSE(g.keyframe_despite_jump(0, 0));  // no reference points: nothing says tracking runs out
+  c.keyframe_below_reference_share = 0.0;  // the first version: a jump always vetoes
+  EXPECT_FALSE(PoseGuardRules(c).keyframe_despite_jump(1, 300));
+}
+
 // 3-D points in front of the camera, observed with the true pose (background) or with the points
 // displaced as one rigid group (a person walking): the group's observations agree on another pose.
 struct Scene {

@@ -445,7 +445,8 @@ nlohmann::json SlamSystem::statistics() {
   }
   j["pose_guard"] = {{"jumps", tracker_.guard_stats().jumps},
                      {"resolved", tracker_.guard_stats().resolved},
-                     {"keyframes_vetoed", tracker_.guard_stats().keyframes_vetoed}};
+                     {"keyframes_vetoed", tracker_.guard_stats().keyframes_vetoed},
+                     {"keyframes_despite_jump", tracker_.guard_stats().keyframes_despite_jump}};
   j["subpixel"] = {{"enabled", config_.tracker.subpixel.enabled},
                    {"frames", tracker_.subpixel_stats().frames},
                    {"candidates", tracker_.subpixel_stats().candidates},

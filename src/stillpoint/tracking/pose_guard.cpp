@@ -10,6 +10,7 @@ PoseGuardConfig PoseGuardConfig::from_yaml(const ConfigReader& r) {
   r.read("max_translation_m", c.max_translation_m, 0.001, 1.0);
   r.read("max_rotation_deg", c.max_rotation_deg, 0.05, 45.0);
   r.read("min_suspect_share", c.min_suspect_share, 0.0, 1.0);
+  r.read("keyframe_below_reference_share", c.keyframe_below_reference_share, 0.0, 1.0);
   return c;
 }
 
@@ -33,6 +34,11 @@ bool PoseGuardRules::blames_suspects(int inliers, int suspect_inliers) const {
 bool PoseGuardRules::accepts_resolve(const PoseDeviation& before, const PoseDeviation& after,
                                      int inliers_after, int min_inliers) const {
   return inliers_after >= min_inliers && normalized(after) < normalized(before);
+}
+
+bool PoseGuardRules::keyframe_despite_jump(int inliers, int reference_tracked) const {
+  return static_cast<double>(inliers) <
+         config_.keyframe_below_reference_share * static_cast<double>(reference_tracked);
 }
 
 double PoseGuardRules::normalized(const PoseDeviation& d) const {

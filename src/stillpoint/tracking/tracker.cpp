@@ -156,10 +156,14 @@ TrackOutcome Tracker::track_frame(Frame& frame, const MappingStatus& mapping) {
         state_ = TrackingState::Ok;
         // No keyframe from a pose that is not verified yet.
         if (verify_left_ == 0 && need_keyframe(view, frame, mapping)) {
-          if (jumped) {
-            ++guard_stats_.keyframes_vetoed;
-          } else {
+          if (!jumped) {
             make_keyframe = true;
+          } else if (guard_.keyframe_despite_jump(
+                         frame.matched(), reference_tracked(view))) {
+            ++guard_stats_.keyframes_despite_jump;
+            make_keyframe = true;
+          } else {
+            ++guard_stats_.keyframes_vetoed;
           }
         }
       } else {
@@ -565,6 +569,11 @@ bool Tracker::relocalize(Frame& frame) {
   return false;
 }
 
+int Tracker::reference_tracked(const map::MapReader& view) const {
+  // ORB-SLAM's "tracked points" of the reference: seen by 3 keyframes (2 while the map has 2).
+  return view.tracked_points(reference_, view.live_keyframes() <= 2 ? 2 : 3);
+}
+
 bool Tracker::need_keyframe(const map::MapReader& view, const Frame& frame,
                             const MappingStatus& mapping) const {
   KeyframeCandidate c;
@@ -572,7 +581,7 @@ bool Tracker::need_keyframe(const map::MapReader& view, const Frame& frame,
   c.fps = fps_;
   c.tracked_inliers = frame.matched();
   c.keyframes_in_map = view.live_keyframes();
-  c.reference_tracked = view.tracked_points(reference_, c.keyframes_in_map <= 2 ? 2 : 3);
+  c.reference_tracked = reference_tracked(view);
   c.mapping_idle = mapping.idle;
   c.mapping_queue = mapping.queue;
   c.image_width = camera_.width;

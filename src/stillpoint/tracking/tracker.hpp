@@ -138,6 +138,8 @@ class Tracker {
   void update_local_map(const map::MapReader& view, Frame& frame);
   void collect_local_points(const Frame& frame);
   void refresh_last_frame(const map::MapReader& view);
+  // The reference keyframe's points seen by enough keyframes to count as mapped (the keyframe rules' base).
+  [[nodiscard]] int reference_tracked(const map::MapReader& view) const;
   [[nodiscard]] bool need_keyframe(const map::MapReader& view, const Frame& frame,
                                    const MappingStatus& mapping) const;
   // A keyframe is drafted from the frame without the lock (features, grid, thumbnail, features by
