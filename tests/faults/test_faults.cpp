@@ -37,17 +37,20 @@ namespace fs = std::filesystem;
 
 const fs::path kSource = fs::path(SP_SHARED_DIR) / "data" / "dynsynth" / "office_a_static_xyz_150";
 const fs::path kConfig = fs::path(SP_SOURCE_DIR) / "config" / "stillpoint.yaml";
+// Somewhere else: a real kitchen (7-Scenes, Kinect v1), for the map-merging test.
+const fs::path kKitchen = fs::path(SP_SHARED_DIR) / "data" / "real" / "sevenscenes_redkitchen_dev";
 
 struct Frame {
   std::string rgb_stamp, rgb, depth_stamp, depth;  // as listed in associations.txt
   // Replayed frames (replayed()): the source files and stamp they are copies of.
   std::string source_rgb, source_depth, source_stamp;
+  bool no_groundtruth = false;  // a frame of another world (mirrored): left out of groundtruth.txt
 };
 
-std::vector<Frame> source_frames() {
+std::vector<Frame> source_frames(const fs::path& source = kSource) {
   std::vector<Frame> out;
-  for (const auto& rec : io::read_tum_text(kSource / "associations.txt", 4)) {
-    out.push_back({rec.columns[0], rec.columns[1], rec.columns[2], rec.columns[3], {}, {}, {}});
+  for (const auto& rec : io::read_tum_text(source / "associations.txt", 4)) {
+    out.push_back({rec.columns[0], rec.columns[1], rec.columns[2], rec.columns[3], {}, {}, {}, false});
   }
   return out;
 }
@@ -56,22 +59,22 @@ std::vector<Frame> source_frames() {
 // lists themselves are read and associated), camera.yaml and groundtruth.txt.
 class Sequence {
  public:
-  Sequence(const std::string& name, const std::vector<Frame>& frames)
-      : dir_(fs::path(SP_TEST_TMP_DIR) / "faults" / name), frames_(frames) {
+  Sequence(const std::string& name, const std::vector<Frame>& frames, const fs::path& source = kSource)
+      : dir_(fs::path(SP_TEST_TMP_DIR) / "faults" / name), source_(source), frames_(frames) {
     fs::remove_all(dir_);
     fs::create_directories(dir_ / "rgb");
     fs::create_directories(dir_ / "depth");
     bool replayed = false;
     for (const auto& f : frames_) {
-      fs::copy_file(kSource / (f.source_rgb.empty() ? f.rgb : f.source_rgb), dir_ / f.rgb);
-      fs::copy_file(kSource / (f.source_depth.empty() ? f.depth : f.source_depth), dir_ / f.depth);
+      fs::copy_file(source_ / (f.source_rgb.empty() ? f.rgb : f.source_rgb), dir_ / f.rgb);
+      fs::copy_file(source_ / (f.source_depth.empty() ? f.depth : f.source_depth), dir_ / f.depth);
       replayed = replayed || !f.source_stamp.empty();
     }
-    fs::copy_file(kSource / "camera.yaml", dir_ / "camera.yaml");
+    fs::copy_file(source_ / "camera.yaml", dir_ / "camera.yaml");
     if (replayed) {
       write_replayed_groundtruth();
     } else {
-      fs::copy_file(kSource / "groundtruth.txt", dir_ / "groundtruth.txt");
+      fs::copy_file(source_ / "groundtruth.txt", dir_ / "groundtruth.txt");
     }
     // The shared data is read-only; the copies must take the injected faults.
     for (const auto& e : fs::recursive_directory_iterator(dir_)) {
@@ -94,10 +97,11 @@ class Sequence {
   }
   // Ground truth of replayed frames: the source pose nearest in time to the frame each one copies.
   void write_replayed_groundtruth() const {
-    const auto gt = io::read_tum_trajectory(kSource / "groundtruth.txt");
+    const auto gt = io::read_tum_trajectory(source_ / "groundtruth.txt");
     std::ofstream out(dir_ / "groundtruth.txt");
     out << "# timestamp tx ty tz qx qy qz qw\n";
     for (const auto& f : frames_) {
+      if (f.no_groundtruth) continue;
       const double t = std::stod(f.source_stamp.empty() ? f.rgb_stamp : f.source_stamp);
       const auto nearest = std::min_element(gt.begin(), gt.end(), [t](const auto& a, const auto& b) {
         return std::abs(a.stamp - t) < std::abs(b.stamp - t);
@@ -116,6 +120,7 @@ class Sequence {
 
  private:
   fs::path dir_;
+  fs::path source_;
   std::vector<Frame> frames_;
 };
 
@@ -186,10 +191,14 @@ class Faults : public ::testing::Test {
   // Source frames `order` played as one sequence at 30 Hz from the first frame's stamp, copied under
   // new names (a frame may appear twice), each with its source frame's ground truth.
   [[nodiscard]] std::vector<Frame> replayed(const std::vector<std::size_t>& order) const {
+    return replayed_from(all_, order);
+  }
+  [[nodiscard]] static std::vector<Frame> replayed_from(const std::vector<Frame>& all,
+                                                        const std::vector<std::size_t>& order) {
     std::vector<Frame> out;
-    const double t0 = std::stod(all_.front().rgb_stamp);
+    const double t0 = std::stod(all.front().rgb_stamp);
     for (std::size_t k = 0; k < order.size(); ++k) {
-      const Frame& src = all_.at(order[k]);
+      const Frame& src = all.at(order[k]);
       char stamp[32], name[32];
       std::snprintf(stamp, sizeof stamp, "%.6f", t0 + static_cast<double>(k) / 30.0);
       std::snprintf(name, sizeof name, "%04zu", k);
@@ -446,6 +455,133 @@ TEST_F(Faults, ReplayedStartIsTrackedInTheOneMapWithoutDuplicateKeyframes) {
   std::printf("[ replay   ] keyframes made in the replay %d, live keyframes added %d, loops closed %d\n",
               made, live, o.result.stats["loops_closed"].get<int>());
   EXPECT_LE(live, 0);
+}
+
+// Issue 15, the Atlas (docs/robustness.md "New maps and merging"). Each frame's map, from the run's
+// trajectory_maps.txt (stamp -> map id).
+std::vector<std::pair<double, int>> trajectory_maps(const Sequence& seq) {
+  std::vector<std::pair<double, int>> out;
+  std::ifstream in(fs::path(SP_TEST_TMP_DIR) / "faults" / (seq.dir().filename().string() + "_out") /
+                   "trajectory_maps.txt");
+  std::string line;
+  while (std::getline(in, line)) {
+    if (line.empty() || line[0] == '#') continue;
+    std::istringstream ls(line);
+    double stamp = 0;
+    int map = -1;
+    ls >> stamp >> map;
+    out.emplace_back(stamp, map);
+  }
+  return out;
+}
+
+// Left-right mirrored frames are a world no map has seen (ORB descriptors do not match mirrored
+// patches) and yet a consistent one (a mirrored scene), so a new map can track there.
+void mirror(const fs::path& image) {
+  const cv::Mat m = cv::imread(image.string(), cv::IMREAD_UNCHANGED);
+  ASSERT_FALSE(m.empty()) << image;
+  cv::Mat flipped;
+  cv::flip(m, flipped, 1);
+  ASSERT_TRUE(cv::imwrite(image.string(), flipped)) << image;
+}
+
+// Carried to a place no map holds, for longer than tracking.new_map_after_lost_frames (45): frames 0-79,
+// then 60 frames of a mirrored world (stamps going on), then frames 0-59 again. The tracker starts map 1
+// in the mirrored world at the last trusted pose and, back in the office, relocalises in map 0. No frame
+// saw both maps, so nothing gives the transform between them: map 1 stays unmerged, and its frames are
+// flagged (trajectory_maps.txt, stats.json), never silently mixed with map 0's.
+TEST_F(Faults, KidnappedToAnUnseenPlaceStartsANewMapWhoseFramesAreFlagged) {
+  constexpr std::size_t kHome = 80, kAway = 60, kBack = 60;
+  std::vector<std::size_t> order;
+  for (std::size_t i = 0; i < kHome + kAway; ++i) order.push_back(i);
+  for (std::size_t i = 0; i < kBack; ++i) order.push_back(i);
+  std::vector<Frame> frames = replayed(order);
+  for (std::size_t k = kHome; k < kHome + kAway; ++k) frames[k].no_groundtruth = true;
+  const Sequence seq("kidnapped_unseen", frames);
+  for (std::size_t k = kHome; k < kHome + kAway; ++k) {
+    mirror(seq.rgb(k));
+    mirror(seq.depth(k));
+  }
+  const Outcome o = run(seq);
+  const auto& st = o.result.stats;
+  std::printf("[ atlas    ] unseen: maps %d merges %d frames_per_map %s unmerged %s lost %d\n",
+              st["maps"].get<int>(), st["merges"].get<int>(), st["frames_per_map"].dump().c_str(),
+              st["unmerged_maps"].dump().c_str(), st["lost_frames"].get<int>());
+  EXPECT_TRUE(o.result.completed);
+  EXPECT_EQ(st["maps"].get<int>(), 2);
+  EXPECT_EQ(st["merges"].get<int>(), 0);
+  EXPECT_EQ(st["unmerged_maps"], nlohmann::json::array({1}));
+  EXPECT_EQ(o.tracked_in(seq, 0, kHome), kHome);
+  // Lost for 45 frames away (relocalisation cannot work there), then map 1 tracks the rest.
+  const std::size_t away = o.tracked_in(seq, kHome, kHome + kAway);
+  EXPECT_GE(away, kAway - 46);
+  EXPECT_LE(away, kAway - 45);
+  EXPECT_GE(o.tracked_in(seq, kHome + kAway, order.size()), kBack - 6);
+  // Every written frame is named with its map: the mirrored ones map 1, the office ones map 0.
+  const auto maps = trajectory_maps(seq);
+  ASSERT_EQ(maps.size(), o.stamps.size());
+  std::size_t in_map1 = 0;
+  for (std::size_t i = 0; i < maps.size(); ++i) {
+    EXPECT_NEAR(maps[i].first, o.stamps[i], 1e-5);
+    const bool mirrored =
+        std::any_of(seq.frames().begin() + kHome, seq.frames().begin() + kHome + kAway,
+                    [&](const Frame& f) { return std::abs(std::stod(f.rgb_stamp) - maps[i].first) < 1e-5; });
+    EXPECT_EQ(maps[i].second, mirrored ? 1 : 0) << std::fixed << maps[i].first;
+    in_map1 += maps[i].second == 1 ? 1 : 0;
+  }
+  EXPECT_EQ(st["frames_per_map"]["1"].get<std::size_t>(), in_map1);
+  EXPECT_EQ(st["frames_per_map"]["0"].get<std::size_t>(), o.stamps.size() - in_map1);
+  // The office frames (ground truth covers only them) are as accurate as in the other fault tests.
+  ASSERT_TRUE(o.result.ate_rmse.has_value());
+  EXPECT_LT(*o.result.ate_rmse, 0.02);
+  expect_database_matches_map(st);
+}
+
+// Carried away and walking back (the merge), on a real kitchen (7-Scenes; every second frame, so 15 Hz,
+// to keep the test short): frames 0-78, then the camera is carried ~1.3 m to where it is at frame kFar
+// and walks the recorded path backwards to frame 0. There no keyframe of map 0 is in view: lost for
+// tracking.new_map_after_lost_frames (45) frames, then map 1 starts at the last trusted pose. Walking
+// back into the part map 0 holds, a frame of map 1 is found in map 0 too; verified over the next frames,
+// map 1 is moved into map 0's frame and merged. Every written frame must then be in map 0 and about as
+// accurate as in an unbroken run over the same path (frames 0..kFar and back, no kidnap).
+TEST_F(Faults, KidnappedCameraWalkingBackIntoTheOldMapIsMerged) {
+  SP_REQUIRE_SHARED(kKitchen / "associations.txt");
+  const std::vector<Frame> kitchen = source_frames(kKitchen);
+  constexpr std::size_t kHome = 80, kFar = 420;
+  ASSERT_GT(kitchen.size(), kFar);
+  std::vector<std::size_t> order, unbroken;
+  for (std::size_t i = 0; i < kHome; i += 2) order.push_back(i);
+  for (std::size_t i = kFar + 2; i >= 2;) order.push_back(i -= 2);
+  for (std::size_t i = 0; i <= kFar; i += 2) unbroken.push_back(i);
+  for (std::size_t i = kFar + 2; i >= 2;) unbroken.push_back(i -= 2);
+  const Sequence base_seq("merge_unbroken", replayed_from(kitchen, unbroken), kKitchen);
+  const Outcome base = run(base_seq);
+  const Sequence seq("merge_kidnapped", replayed_from(kitchen, order), kKitchen);
+  const Outcome o = run(seq);
+  const auto& st = o.result.stats;
+  std::printf(
+      "[ atlas    ] merge: maps %d merges %d candidates %d rejected %d frames_per_map %s lost %d, "
+      "ate %.4f m (unbroken %.4f m, lost %d)\n",
+      st["maps"].get<int>(), st["merges"].get<int>(), st["merge_candidates"].get<int>(),
+      st["merges_rejected"].get<int>(), st["frames_per_map"].dump().c_str(), st["lost_frames"].get<int>(),
+      o.result.ate_rmse.value_or(-1.0), base.result.ate_rmse.value_or(-1.0),
+      base.result.stats["lost_frames"].get<int>());
+  EXPECT_TRUE(o.result.completed);
+  EXPECT_EQ(st["maps"].get<int>(), 2);
+  EXPECT_EQ(st["merges"].get<int>(), 1);
+  EXPECT_EQ(st["unmerged_maps"], nlohmann::json::array());
+  EXPECT_EQ(o.tracked_in(seq, 0, kHome / 2), kHome / 2);
+  // Every frame is written but the lost ones before the new map.
+  EXPECT_EQ(o.stamps.size() + static_cast<std::size_t>(st["lost_frames"].get<int>()), order.size());
+  EXPECT_LE(st["lost_frames"].get<int>(), 46);
+  const auto maps = trajectory_maps(seq);
+  ASSERT_EQ(maps.size(), o.stamps.size());
+  for (const auto& [stamp, map] : maps) EXPECT_EQ(map, 0) << std::fixed << stamp;
+  EXPECT_EQ(st["frames_per_map"], nlohmann::json({{"0", o.stamps.size()}}));
+  ASSERT_TRUE(o.result.ate_rmse.has_value());
+  ASSERT_TRUE(base.result.ate_rmse.has_value());
+  EXPECT_LT(*o.result.ate_rmse, 1.5 * *base.result.ate_rmse);
+  expect_database_matches_map(st);
 }
 
 // Timestamps that do not increase cannot be associated: the sequence is refused before the run, with

@@ -56,6 +56,16 @@ void check_loops_against(const std::vector<io::StampedPose>& gt,
   stats["loops_false"] = n_false;
 }
 
+// trajectory.txt stays plain TUM (evo reads it); the map of each of its lines is in this side file.
+void write_trajectory_maps(const std::filesystem::path& file,
+                           const std::vector<std::pair<double, std::uint32_t>>& maps) {
+  std::ofstream out(file);
+  if (!out) throw Error("cannot write " + file.string());
+  out << "# timestamp map_id (0: the first map or one merged into it; other: a map never merged, own "
+         "frame)\n";
+  for (const auto& [stamp, m] : maps) out << fmt::format("{:.6f} {}\n", stamp, m);
+}
+
 void write_outputs(stillpoint::System& system, const RunOptions& options, const nlohmann::json& run_stats,
                    RunResult& result) {
   std::filesystem::create_directories(options.out_dir);
@@ -67,7 +77,14 @@ void write_outputs(stillpoint::System& system, const RunOptions& options, const 
   // API's rotation matrices), so its figures stay those of the files above.
   pipeline::SlamSystem& slam = SystemAccess::pipeline(system);
   const auto trajectory = slam.trajectory();
+  write_trajectory_maps(options.out_dir / "trajectory_maps.txt", slam.trajectory_maps());
   result.stats = slam.statistics();
+  if (!result.stats["unmerged_maps"].empty()) {
+    spdlog::warn(
+        "maps {} were never merged into map 0: their frames in trajectory.txt are in their own frames "
+        "(trajectory_maps.txt names each frame's map)",
+        result.stats["unmerged_maps"].dump());
+  }
   result.stats["completed"] = result.completed;
   for (const auto& [k, v] : options.extra_stats.items()) result.stats[k] = v;
   for (const auto& [k, v] : run_stats.items()) result.stats[k] = v;

@@ -208,6 +208,12 @@ std::optional<LoopCloser::VerifiedLoop> LoopCloser::verify(map::KeyframeId query
   const map::Keyframe* q = view.keyframe(query);
   const map::Keyframe* m = view.keyframe(match);
   if (q == nullptr || m == nullptr || q->bad || m->bad) return std::nullopt;
+  // Another map (not merged yet) has its own frame: no loop, and no drift to measure. The tracker
+  // merges maps (docs/robustness.md "New maps and merging").
+  if (q->map_id != m->map_id) {
+    spdlog::debug("loop candidate {}->{}: keyframes of different maps, left to map merging", query, match);
+    return std::nullopt;
+  }
 
   // 1. Descriptor matches: query features with depth against the match keyframe's map points.
   std::vector<int> q_rows, m_rows;
@@ -435,7 +441,8 @@ bool LoopCloser::correct(VerifiedLoop loop) {
     };
     for (map::KeyframeId k : ids) {
       const map::Keyframe* kf = view.keyframe(k);
-      vertices.push_back({k, kf->T_cw, k == ids.front() || k == match});
+      // Keyframes of other maps (not merged yet) share no edge with the loop's map: held as they are.
+      vertices.push_back({k, kf->T_cw, k == ids.front() || k == match || kf->map_id != m->map_id});
       if (kf->parent != map::kNoKeyframe && old_pose.contains(kf->parent) &&
           !view.keyframe(kf->parent)->bad) {
         edges.push_back({k, kf->parent, relative_old(k, kf->parent), 1.0});
@@ -500,7 +507,13 @@ void LoopCloser::run_global_ba(std::uint64_t changes_at_start) {
   {
     map::MapView view = map_.view();
     const auto ids = view.keyframe_ids_sorted();
-    for (map::KeyframeId k : ids) problem.keyframes.push_back({k, view.keyframe(k)->T_cw, k == ids.front()});
+    // Each map's root fixes its gauge (maps not merged yet share nothing).
+    std::vector<map::KeyframeId> roots;
+    for (map::MapId m : view.live_maps()) roots.push_back(view.map_root(m));
+    for (map::KeyframeId k : ids) {
+      const bool root = std::find(roots.begin(), roots.end(), k) != roots.end();
+      problem.keyframes.push_back({k, view.keyframe(k)->T_cw, k == ids.front() || root});
+    }
     std::vector<map::PointId> pids;
     for (const auto& [pid, p] : view.points()) {
       if (!p.bad) pids.push_back(pid);

@@ -16,6 +16,9 @@ namespace sp::map {
 
 struct Keyframe {
   KeyframeId id = kNoKeyframe;
+  // Keyframes of different maps share no points, so covisibility never links them; what picks
+  // keyframes by id or recency (relocalisation, loop candidates, gauge roots) checks it.
+  MapId map_id = kFirstMap;
   std::size_t frame_index = 0;
   double stamp = 0;
   geo::SE3 T_cw;

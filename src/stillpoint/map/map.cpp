@@ -382,6 +382,29 @@ std::size_t MapReader::live_keyframes() const {
                                                 [](const auto& kv) { return !kv.second.bad; }));
 }
 
+std::size_t MapReader::live_keyframes(MapId m) const {
+  return static_cast<std::size_t>(
+      std::count_if(map_.keyframes_.begin(), map_.keyframes_.end(),
+                    [m](const auto& kv) { return !kv.second.bad && kv.second.map_id == m; }));
+}
+
+KeyframeId MapReader::map_root(MapId m) const {
+  KeyframeId root = kNoKeyframe;
+  for (const auto& [id, kf] : map_.keyframes_) {
+    if (!kf.bad && kf.map_id == m && (root == kNoKeyframe || id < root)) root = id;
+  }
+  return root;
+}
+
+std::vector<MapId> MapReader::live_maps() const {
+  std::vector<MapId> maps;
+  for (const auto& [id, kf] : map_.keyframes_) {
+    if (!kf.bad && std::find(maps.begin(), maps.end(), kf.map_id) == maps.end()) maps.push_back(kf.map_id);
+  }
+  std::sort(maps.begin(), maps.end());
+  return maps;
+}
+
 std::size_t MapReader::live_points() const {
   return static_cast<std::size_t>(
       std::count_if(map_.points_.begin(), map_.points_.end(), [](const auto& kv) { return !kv.second.bad; }));
@@ -429,6 +452,41 @@ std::size_t MapView::purge_bad(KeyframeId retired_before) {
     ++purged;
   }
   return purged;
+}
+
+std::size_t MapView::merge_map(MapId from, MapId into, const geo::SE3& S_into_from, KeyframeId link_from,
+                               KeyframeId link_into) {
+  // Points first: they belong to `from` when the keyframe that made them (or any observer) does.
+  auto in_from = [&](KeyframeId k) {
+    const Keyframe* kf = keyframe(k);
+    return kf != nullptr && kf->map_id == from;
+  };
+  for (auto& [pid, p] : map_.points_) {
+    bool moves = in_from(p.reference) || in_from(p.first_keyframe);
+    for (auto it = p.observations.begin(); !moves && it != p.observations.end(); ++it)
+      moves = in_from(it->first);
+    if (moves) p.position = S_into_from * p.position;
+  }
+  const geo::SE3 S_from_into = S_into_from.inverse();
+  std::size_t moved = 0;
+  KeyframeId root = kNoKeyframe;
+  for (auto& [kid, kf] : map_.keyframes_) {
+    if (kf.map_id != from) continue;
+    kf.T_cw = kf.T_cw * S_from_into;
+    kf.map_id = into;
+    ++moved;
+    if (kf.parent == kNoKeyframe && (root == kNoKeyframe || kid < root)) root = kid;
+  }
+  Keyframe* link = keyframe(link_into);
+  if (root != kNoKeyframe && link != nullptr && root != link_into) {
+    keyframe(root)->parent = link_into;
+    link->children.insert(root);
+  }
+  if (Keyframe* a = keyframe(link_from); a != nullptr && link != nullptr && link_from != link_into) {
+    a->loop_edges.insert(link_into);
+    link->loop_edges.insert(link_from);
+  }
+  return moved;
 }
 
 }  // namespace sp::map

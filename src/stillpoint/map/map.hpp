@@ -66,6 +66,11 @@ class MapReader {
   [[nodiscard]] const std::unordered_map<PointId, MapPoint>& points() const;
   [[nodiscard]] std::vector<KeyframeId> keyframe_ids_sorted() const;
   [[nodiscard]] std::size_t live_keyframes() const;
+  [[nodiscard]] std::size_t live_keyframes(MapId m) const;  // ... of map m
+  // The lowest live keyframe id of map m, its gauge root in BA and the pose graph (kNoKeyframe: none).
+  [[nodiscard]] KeyframeId map_root(MapId m) const;
+  // The maps that hold live keyframes, ascending.
+  [[nodiscard]] std::vector<MapId> live_maps() const;
   [[nodiscard]] std::size_t live_points() const;
   // The ids the next add_keyframe / add_point will hand out (map files save them).
   [[nodiscard]] std::pair<KeyframeId, PointId> next_ids() const;
@@ -108,6 +113,12 @@ class MapView : public MapReader {
   bool hold_keyframe(KeyframeId kf);
   void release_keyframe(KeyframeId kf);
   void replace_point(PointId old_id, PointId by);
+  // Map merging: moves every keyframe (culled ones too) and point of map `from` into the frame of map
+  // `into` (p_into = S_into_from * p_from), relabels the keyframes to `into`, hangs `from`'s root
+  // keyframe under `link_into` in the spanning tree and records a loop edge link_from <-> link_into
+  // (the pose graph's edge between the two parts). Returns the keyframes moved.
+  std::size_t merge_map(MapId from, MapId into, const geo::SE3& S_into_from, KeyframeId link_from,
+                        KeyframeId link_into);
 
   void update_point_descriptor(PointId p);
   void update_point_normal_and_depth(PointId p, const ScalePyramid& pyramid);

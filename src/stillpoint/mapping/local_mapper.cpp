@@ -250,7 +250,8 @@ bool LocalMapper::local_bundle_adjustment(map::KeyframeId kid, const std::atomic
     std::vector<map::KeyframeId> kf_ids(local.begin(), local.end());
     kf_ids.insert(kf_ids.end(), fixed.begin(), fixed.end());
     std::sort(kf_ids.begin(), kf_ids.end());
-    const map::KeyframeId root = view.keyframe_ids_sorted().front();
+    // Each map's first keyframe anchors its gauge (a map started after a loss has its own).
+    const map::KeyframeId root = view.map_root(view.keyframe(kid)->map_id);
     for (map::KeyframeId k : kf_ids) {
       // The first keyframe anchors the gauge.
       problem.keyframes.push_back({k, view.keyframe(k)->T_cw, fixed.contains(k) || k == root});

@@ -37,12 +37,13 @@ std::vector<map::KeyframeId> RelocalizationIndex::erase_culled(map::MapView& vie
   return culled;
 }
 
-std::vector<map::KeyframeId> RelocalizationIndex::candidates(const cv::Mat& descriptors, std::size_t n) {
+std::vector<map::KeyframeId> RelocalizationIndex::candidates(
+    const cv::Mat& descriptors, std::size_t n, const std::function<bool(map::KeyframeId)>& exclude) {
   if (descriptors.empty()) return {};  // a black frame: nothing to look up
   const loop::BowVector bow = describe(descriptors);
   std::lock_guard lock(mutex_);
   ++stats_.queries;
-  const auto hits = db_.query(bow, 0.8);
+  const auto hits = db_.query(bow, 0.8, exclude);
   std::vector<map::KeyframeId> out;
   for (std::size_t i = 0; i < hits.size() && i < n; ++i) out.push_back(hits[i].id);
   return out;

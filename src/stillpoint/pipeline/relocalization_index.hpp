@@ -4,6 +4,7 @@
 // processed it, and erased when the map culls it. Thread-safe (the database's and its own mutex, both
 // leaves: callers may hold a map view).
 #include <cstddef>
+#include <functional>
 #include <memory>
 #include <mutex>
 #include <set>
@@ -33,7 +34,9 @@ class RelocalizationIndex {
   void erase(map::KeyframeId id);
   // ORB-SLAM's relocalisation query over every filed keyframe: those sharing at least 80 % of the most
   // shared words with the frame's descriptors, best L1 score first, at most `n`.
-  [[nodiscard]] std::vector<map::KeyframeId> candidates(const cv::Mat& descriptors, std::size_t n);
+  // Keyframes `exclude` rejects are left out before the 80 % rule (map merging asks for other maps only).
+  [[nodiscard]] std::vector<map::KeyframeId> candidates(
+      const cv::Mat& descriptors, std::size_t n, const std::function<bool(map::KeyframeId)>& exclude = {});
   [[nodiscard]] std::size_t size() const;
   [[nodiscard]] RelocalizationIndexStats stats() const;
 

@@ -10,6 +10,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <map>
 #include <opencv2/imgproc.hpp>
 
 #include "stillpoint/common/error.hpp"
@@ -123,6 +124,16 @@ void SlamSystem::attach_relocalization_index() {
       [index = reloc_index_.get(), n = config_.tracker.relocalization_candidates](map::MapView&,
                                                                                   const track::Frame& frame) {
         return index->candidates(frame.features.descriptors, n);
+      });
+  // Map merging asks the same database for other maps' keyframes only: the current map's own keyframes
+  // would otherwise crowd them out of the query's 80 % rule.
+  tracker_.set_other_map_candidates(
+      [index = reloc_index_.get(), n = config_.tracker.relocalization_candidates](
+          map::MapView& view, const track::Frame& frame, map::MapId current) {
+        return index->candidates(frame.features.descriptors, n, [&view, current](map::KeyframeId id) {
+          const map::Keyframe* kf = view.keyframe(id);
+          return kf == nullptr || kf->bad || kf->map_id == current;
+        });
       });
 }
 
@@ -260,6 +271,12 @@ void SlamSystem::load_map(const std::filesystem::path& file) {
 }
 
 map::MapSaveResult SlamSystem::save_map(const std::filesystem::path& file) {
+  if (tracker_.open_maps().size() > 1) {
+    // Map files keep no map ids: an unmerged map's keyframes load as part of map 0, in their own frame.
+    spdlog::warn(
+        "saving {} maps that were never merged as one map: their frames differ; a loaded copy mixes them",
+        tracker_.open_maps().size());
+  }
   map::MapFileInfo info;
   info.camera = camera_.intrinsics;
   const map::ScalePyramid pyramid = frontend_.pyramid();
@@ -390,6 +407,13 @@ std::vector<io::StampedPose> SlamSystem::trajectory() {
   return out;
 }
 
+std::vector<std::pair<double, std::uint32_t>> SlamSystem::trajectory_maps() {
+  map::MapView view = map_.view();
+  std::vector<std::pair<double, std::uint32_t>> out;
+  for (const auto& p : tracker_.trajectory().resolve(view)) out.emplace_back(p.stamp, map::to_int(p.map_id));
+  return out;
+}
+
 std::vector<io::StampedPose> SlamSystem::keyframe_trajectory() {
   map::MapView view = map_.view();
   std::vector<io::StampedPose> out;
@@ -467,6 +491,23 @@ nlohmann::json SlamSystem::statistics() {
     map::MapView view = map_.view();
     j["keyframes"] = view.live_keyframes();
     j["map_points"] = view.live_points();
+    // Atlas: maps started (the first included), merges, and the trajectory's frames per map as they are
+    // now (a map never merged keeps its own frame: its frames are flagged, not silently mixed).
+    const track::AtlasStats& a = tracker_.atlas_stats();
+    j["maps"] = a.maps_created;
+    j["merges"] = a.merges;
+    j["merge_candidates"] = a.merge_candidates;
+    j["merges_rejected"] = a.merges_rejected;
+    std::map<std::uint32_t, std::size_t> per_map;
+    for (const auto& p : tracker_.trajectory().resolve(view)) ++per_map[map::to_int(p.map_id)];
+    nlohmann::json frames = nlohmann::json::object();
+    for (const auto& [m, n] : per_map) frames[std::to_string(m)] = n;
+    j["frames_per_map"] = frames;
+    nlohmann::json unmerged = nlohmann::json::array();
+    for (map::MapId m : tracker_.open_maps()) {
+      if (m != map::kFirstMap) unmerged.push_back(map::to_int(m));
+    }
+    j["unmerged_maps"] = unmerged;
   }
   nlohmann::json stages = nlohmann::json::object();
   for (const auto& [name, s] : times_.summaries()) {

@@ -72,6 +72,9 @@ class SlamSystem {
 
   [[nodiscard]] std::vector<io::StampedPose> trajectory();
   [[nodiscard]] std::vector<io::StampedPose> keyframe_trajectory();
+  // Per frame of trajectory(), in the same order: the map its pose is in (0 = the first map, or a map
+  // merged into it; another id = a map started after a loss and never merged, its own frame).
+  [[nodiscard]] std::vector<std::pair<double, std::uint32_t>> trajectory_maps();
   // Positions of the live map points, at most `max` (evenly subsampled), for a live view.
   [[nodiscard]] std::vector<Eigen::Vector3f> map_point_positions(std::size_t max);
   [[nodiscard]] nlohmann::json statistics();

@@ -29,6 +29,7 @@ TrackerConfig TrackerConfig::from_yaml(const ConfigReader& r) {
   r.read("relocalization_verify_frames", c.relocalization_verify_frames, 0, 300);
   r.read("relocalization_max_step_m", c.relocalization_max_step_m, 0.001, 10.0);
   r.read("relocalization_max_step_deg", c.relocalization_max_step_deg, 0.01, 180.0);
+  r.read("new_map_after_lost_frames", c.new_map_after_lost_frames, 0, 100000);
   c.pose = opt::PoseOptimizerConfig::from_yaml(r.section("pose_optimizer"));
   c.keyframes = KeyframePolicyConfig::from_yaml(r.section("keyframes"));
   c.guard = PoseGuardConfig::from_yaml(r.section("pose_guard"));
@@ -68,6 +69,10 @@ void Tracker::start_in_existing_map() {
   reference_ = map::kNoKeyframe;
   velocity_.reset();
   refiner_.reset();
+  // The loaded map is map 0 (map files keep no map ids). Without a trusted pose yet no new map starts.
+  current_map_ = map::kFirstMap;
+  open_maps_ = {map::kFirstMap};
+  next_map_ = 1;
 }
 
 TrackOutcome Tracker::track(Frame& frame, const MappingStatus& mapping) {
@@ -121,6 +126,10 @@ TrackOutcome Tracker::track_frame(Frame& frame, const MappingStatus& mapping) {
     } else {
       ++reloc_stats_.attempts;
       ok = relocalized = relocalize(frame);
+      if (!ok && new_map_due(frame)) {
+        start_new_map(frame, out);
+        return finish_frame(frame, out);
+      }
     }
     if (ok) ok = track_local_map(frame);
     if (ok && relocalized) {
@@ -158,8 +167,7 @@ TrackOutcome Tracker::track_frame(Frame& frame, const MappingStatus& mapping) {
         if (verify_left_ == 0 && need_keyframe(view, frame, mapping)) {
           if (!jumped) {
             make_keyframe = true;
-          } else if (guard_.keyframe_despite_jump(
-                         frame.matched(), reference_tracked(view))) {
+          } else if (guard_.keyframe_despite_jump(frame.matched(), reference_tracked(view))) {
             ++guard_stats_.keyframes_despite_jump;
             make_keyframe = true;
           } else {
@@ -172,6 +180,8 @@ TrackOutcome Tracker::track_frame(Frame& frame, const MappingStatus& mapping) {
         state_ = TrackingState::Lost;
         velocity_.reset();
         ++lost_frames_;
+        ++lost_streak_;
+        pending_merge_.reset();  // a merge is verified on consecutive tracked frames
       }
     }
     if (make_keyframe) {
@@ -197,9 +207,14 @@ TrackOutcome Tracker::track_frame(Frame& frame, const MappingStatus& mapping) {
       } else {
         spdlog::warn("frame {}: reference keyframe {} missing, pose not written", frame.index, reference_);
       }
+      // Never in a run with one map (nothing else to find).
+      if (open_maps_.size() > 1 && verify_left_ == 0 && lost_streak_ == 0) look_for_other_maps(frame);
     }
   }
+  return finish_frame(frame, out);
+}
 
+TrackOutcome Tracker::finish_frame(Frame& frame, TrackOutcome& out) {
   out.state = out.verifying ? TrackingState::Lost : state_;
   out.inliers = frame.matched();
   // Outliers are forgotten so the next frame does not project them.
@@ -217,9 +232,12 @@ void Tracker::record_pose(Frame& frame, const geo::SE3& reference_T_cw, TrackOut
   if (verify_left_ > 0) {
     unverified_.push_back(entry);
     ++lost_frames_;  // until the verification passes
+    ++lost_streak_;
     out.verifying = true;
   } else {
     trajectory_.record(entry);
+    lost_streak_ = 0;
+    last_trusted_T_cw_ = frame.T_cw;
   }
 }
 
@@ -236,6 +254,7 @@ void Tracker::accept_relocalization() {
   if (!first_reloc_frame_) first_reloc_frame_ = reloc_frame_;
   for (const TrajectoryEntry& e : unverified_) trajectory_.record(e);
   lost_frames_ -= std::min(lost_frames_, unverified_.size());
+  if (!unverified_.empty()) lost_streak_ = 0;
   if (!unverified_.empty())
     spdlog::info("relocalisation at frame {} verified over {} frames", reloc_frame_, unverified_.size());
   unverified_.clear();
@@ -247,6 +266,10 @@ bool Tracker::initialize(map::MapView& view, Frame& frame) {
   if (with_depth < config_.init_min_features) return false;
   frame.T_cw = geo::SE3();
   frame.has_pose = true;
+  current_map_ = map::kFirstMap;
+  open_maps_ = {map::kFirstMap};
+  next_map_ = 1;
+  ++atlas_stats_.maps_created;
   reference_ = create_keyframe(view, frame, draft_keyframe(frame), config_.init_all_depth_points);
   spdlog::info("map initialised at frame {} with {} points", frame.index, view.live_points());
   return true;
@@ -514,6 +537,26 @@ bool Tracker::relocalize(Frame& frame) {
     }
     candidates = std::move(first);
   }
+  const map::KeyframeId kid = locate(view, frame, candidates, counters_);
+  if (kid == map::kNoKeyframe) return false;
+  reference_ = kid;
+  last_reloc_frame_ = frame.index;
+  relocalized_once_ = true;
+  // Any map's keyframe may relocalise the frame: it then tracks in that map (a map left behind stays
+  // open until a later frame sees both).
+  const map::MapId found_in = view.keyframe(kid)->map_id;
+  if (found_in != current_map_)
+    spdlog::info("frame {} relocalised in map {} (was tracking in map {})", frame.index,
+                 map::to_int(found_in), map::to_int(current_map_));
+  current_map_ = found_in;
+  pending_merge_.reset();
+  spdlog::info("relocalised frame {} against keyframe {}", frame.index, kid);
+  return true;
+}
+
+map::KeyframeId Tracker::locate(map::MapView& view, Frame& frame,
+                                const std::vector<map::KeyframeId>& candidates,
+                                PointCounterUpdates& counters) {
   for (map::KeyframeId kid : candidates) {
     const std::optional<LocalMapSnapshot::Keyframe> kf = snapshot_.add_keyframe(view, kid);
     if (!kf || kf->bad) continue;
@@ -556,22 +599,184 @@ bool Tracker::relocalize(Frame& frame) {
     snapshot_.copy_points(view, local_points_);
     snapshot_.index_copies();
     match_local_points(snapshot_, frame, local_points_, 2.0 * config_.local_search_factor,
-                       MatchContext{camera_, pyramid_, depth_.bf}, counters_);
-    if (optimize_pose(frame) >= config_.min_inliers_after_reloc) {
-      reference_ = kid;
-      last_reloc_frame_ = frame.index;
-      relocalized_once_ = true;
-      spdlog::info("relocalised frame {} against keyframe {}", frame.index, kid);
-      return true;
-    }
+                       MatchContext{camera_, pyramid_, depth_.bf}, counters);
+    if (optimize_pose(frame) >= config_.min_inliers_after_reloc) return kid;
   }
   frame.has_pose = false;
-  return false;
+  return map::kNoKeyframe;
+}
+
+bool Tracker::new_map_due(const Frame& frame) const {
+  if (config_.new_map_after_lost_frames <= 0 || !last_trusted_T_cw_ || verify_left_ > 0) return false;
+  if (lost_streak_ < static_cast<std::size_t>(config_.new_map_after_lost_frames)) return false;
+  const auto with_depth =
+      std::count_if(frame.features.depth.begin(), frame.features.depth.end(), [](float d) { return d > 0; });
+  return with_depth >= config_.init_min_features;
+}
+
+void Tracker::start_new_map(Frame& frame, TrackOutcome& out) {
+  {
+    map::MapView view = map_.view(&lock_clock_);
+    counters_.apply(view);  // what the failed relocalisation saw, as on any lost frame
+    // Seeded at the last trusted pose: the best guess of where the camera is in the old map's frame
+    // (it is one only if the camera was not carried far); a merge later moves the map where it belongs.
+    frame.reset_matches();
+    frame.T_cw = *last_trusted_T_cw_;
+    frame.has_pose = true;
+    current_map_ = map::MapId{next_map_++};
+    open_maps_.push_back(current_map_);
+    ++atlas_stats_.maps_created;
+    KeyframeDraft draft = draft_keyframe(frame);
+    reference_ = create_keyframe(view, frame, std::move(draft), config_.init_all_depth_points);
+    spdlog::warn(
+        "tracking lost for {} frames: frame {} starts map {} ({} keyframes in all maps) at the last "
+        "trusted pose",
+        lost_streak_, frame.index, map::to_int(current_map_), view.live_keyframes());
+    state_ = TrackingState::Ok;
+    velocity_.reset();
+    pending_merge_.reset();
+    out.new_keyframe = reference_;
+    record_pose(frame, frame.T_cw, out);
+  }
+  refiner_.reset();  // the anchors belong to the map left behind
+  refiner_.set_anchor(out.new_keyframe, frame);
+}
+
+void Tracker::look_for_other_maps(Frame& frame) {
+  // Rare (only while several maps are open): one view over the search, as relocalisation.
+  map::MapView view = map_.view(&lock_clock_);
+  std::vector<map::KeyframeId> candidates;
+  auto other_map = [&](map::KeyframeId k) {
+    const map::Keyframe* kf = view.keyframe(k);
+    return kf != nullptr && !kf->bad && kf->map_id != current_map_;
+  };
+  if (pending_merge_) {
+    // Verifying: the keyframe that gave the pose and its neighbours.
+    candidates.push_back(pending_merge_->match);
+    for (map::KeyframeId k : view.best_covisibles(pending_merge_->match, 5)) candidates.push_back(k);
+  } else {
+    // The BoW database's candidates in other maps, then (without one) each other map's newest keyframes.
+    if (other_map_candidates_) {
+      candidates = other_map_candidates_(view, frame, current_map_);
+    } else if (reloc_candidates_) {
+      for (map::KeyframeId k : reloc_candidates_(view, frame))
+        if (other_map(k)) candidates.push_back(k);
+    } else {
+      const std::vector<map::KeyframeId> ids = view.keyframe_ids_sorted();
+      for (auto it = ids.rbegin(); it != ids.rend() && candidates.size() < config_.relocalization_candidates;
+           ++it)
+        if (other_map(*it)) candidates.push_back(*it);
+    }
+  }
+  std::erase_if(candidates, [&](map::KeyframeId k) { return !other_map(k); });
+  if (candidates.empty()) {
+    if (pending_merge_) ++atlas_stats_.merges_rejected;
+    pending_merge_.reset();
+    return;
+  }
+  // The search works on a copy of the frame and must leave the frame's local map as it was.
+  Frame probe = frame;
+  probe.reset_matches();
+  probe.has_pose = false;
+  const map::KeyframeId reference = reference_;
+  const std::vector<map::KeyframeId> local_keyframes = local_keyframes_;
+  const std::vector<map::PointId> local_points = local_points_, local_slots = local_slots_;
+  const bool slots_fresh = local_slots_fresh_;
+  refined_.assign(probe.features.size(), false);
+  PointCounterUpdates ignored;  // the other map's points were not seen by a tracked frame of theirs
+  const map::KeyframeId match = locate(view, probe, candidates, ignored);
+  reference_ = reference;
+  local_keyframes_ = local_keyframes;
+  local_points_ = local_points;
+  local_slots_ = local_slots;
+  local_slots_fresh_ = slots_fresh;
+  if (match == map::kNoKeyframe) {
+    if (pending_merge_) {
+      ++atlas_stats_.merges_rejected;
+      spdlog::info("map merge candidate rejected: frame {} not found in map {} again", frame.index,
+                   map::to_int(pending_merge_->other));
+    }
+    pending_merge_.reset();
+    return;
+  }
+  const map::MapId other = view.keyframe(match)->map_id;
+  const geo::SE3 S_other_cur = probe.T_cw.inverse() * frame.T_cw;  // p_other = S * p_current
+  if (!pending_merge_) {
+    ++atlas_stats_.merge_candidates;
+    spdlog::info("frame {} (map {}) also located in map {} against keyframe {}: verifying a merge",
+                 frame.index, map::to_int(current_map_), map::to_int(other), match);
+    pending_merge_ =
+        PendingMerge{other, match, S_other_cur, config_.relocalization_verify_frames, frame.index};
+  } else {
+    // The same rule as a relocalisation's check: the pose in the other map must be where this frame's
+    // pose, moved by the candidate transform, puts it.
+    const PoseDeviation d = pose_deviation(probe.T_cw, frame.T_cw * pending_merge_->S_other_cur.inverse());
+    if (other != pending_merge_->other || frame.index != pending_merge_->last_frame + 1 ||
+        d.translation_m > config_.relocalization_max_step_m ||
+        d.rotation_deg > config_.relocalization_max_step_deg) {
+      ++atlas_stats_.merges_rejected;
+      spdlog::info("map merge candidate rejected at frame {}: {:.1f} cm / {:.2f} deg from the first estimate",
+                   frame.index, d.translation_m * 100, d.rotation_deg);
+      pending_merge_.reset();
+      return;
+    }
+    --pending_merge_->left;
+    pending_merge_->last_frame = frame.index;
+  }
+  if (pending_merge_->left > 0) return;
+  pending_merge_.reset();
+  // The latest frame's estimate (its pose in both maps is the freshest).
+  const map::MapId into = std::min(other, current_map_), from = std::max(other, current_map_);
+  const geo::SE3 S_into_from = into == other ? S_other_cur : S_other_cur.inverse();
+  // Link keyframes: the frame's reference (current map) and the keyframe it was found against.
+  const map::KeyframeId link_from = from == current_map_ ? reference_ : match;
+  const map::KeyframeId link_into = from == current_map_ ? match : reference_;
+  const std::size_t moved = view.merge_map(from, into, S_into_from, link_from, link_into);
+  // Duplicates: a feature matched in both maps sees one point twice; the older map's point stays.
+  int fused = 0;
+  for (std::size_t i = 0; i < frame.points.size() && i < probe.points.size(); ++i) {
+    if (frame.points[i] == map::kNoPoint || frame.outlier[i] || probe.points[i] == map::kNoPoint ||
+        probe.outlier[i])
+      continue;
+    const map::MapPoint* mine = view.live_point(frame.points[i]);
+    const map::MapPoint* theirs = view.live_point(probe.points[i]);
+    if (mine == nullptr || theirs == nullptr || mine->id == theirs->id) continue;
+    const map::PointId keep = from == current_map_ ? theirs->id : mine->id;
+    const map::PointId drop = from == current_map_ ? mine->id : theirs->id;
+    view.replace_point(drop, keep);
+    frame.points[i] = keep;
+    ++fused;
+  }
+  // Then the cheap part of the loop closer's fusion: the older side's local points projected into the
+  // newer side's keyframes around the link, so covisibility (and local mapping) joins the two parts.
+  std::vector<map::KeyframeId> side = view.best_covisibles(link_from, 10);
+  side.push_back(link_from);
+  std::vector<map::KeyframeId> other_side = view.best_covisibles(link_into, 10);
+  other_side.push_back(link_into);
+  std::vector<map::PointId> points;
+  std::unordered_set<map::PointId> seen;
+  for (map::KeyframeId k : other_side) {
+    for (map::PointId pid : view.keyframe(k)->points)
+      if (pid != map::kNoPoint && seen.insert(pid).second) points.push_back(pid);
+  }
+  const MatchContext ctx{camera_, pyramid_, depth_.bf};
+  for (map::KeyframeId k : side) fused += fuse_into_keyframe(view, k, points, 4.0, ctx);
+  for (map::KeyframeId k : side) view.update_connections(k);
+  for (map::KeyframeId k : other_side) view.update_connections(k);
+  if (from == current_map_ && last_trusted_T_cw_)
+    last_trusted_T_cw_ = *last_trusted_T_cw_ * S_into_from.inverse();
+  if (from == current_map_) frame.T_cw = frame.T_cw * S_into_from.inverse();
+  std::erase(open_maps_, from);
+  current_map_ = into;
+  ++atlas_stats_.merges;
+  map_.notify_big_change();  // BA results computed before the move are dropped; the tracker re-reads
+  spdlog::info("map {} merged into map {} at frame {}: {} keyframes moved, {} points fused, {} maps open",
+               map::to_int(from), map::to_int(into), frame.index, moved, fused, open_maps_.size());
 }
 
 int Tracker::reference_tracked(const map::MapReader& view) const {
   // ORB-SLAM's "tracked points" of the reference: seen by 3 keyframes (2 while the map has 2).
-  return view.tracked_points(reference_, view.live_keyframes() <= 2 ? 2 : 3);
+  return view.tracked_points(reference_, view.live_keyframes(current_map_) <= 2 ? 2 : 3);
 }
 
 bool Tracker::need_keyframe(const map::MapReader& view, const Frame& frame,
@@ -580,7 +785,7 @@ bool Tracker::need_keyframe(const map::MapReader& view, const Frame& frame,
   c.frames_since_keyframe = frame.index - last_keyframe_frame_;
   c.fps = fps_;
   c.tracked_inliers = frame.matched();
-  c.keyframes_in_map = view.live_keyframes();
+  c.keyframes_in_map = view.live_keyframes(current_map_);  // the map tracked in (several after a loss)
   c.reference_tracked = reference_tracked(view);
   c.mapping_idle = mapping.idle;
   c.mapping_queue = mapping.queue;
@@ -616,6 +821,7 @@ bool Tracker::need_keyframe(const map::MapReader& view, const Frame& frame,
 Tracker::KeyframeDraft Tracker::draft_keyframe(const Frame& frame) const {
   KeyframeDraft d;
   map::Keyframe& kf = d.keyframe;
+  kf.map_id = current_map_;
   kf.frame_index = frame.index;
   kf.stamp = frame.stamp;
   kf.T_cw = frame.T_cw;

@@ -47,6 +47,12 @@ struct TrackerConfig {
   int relocalization_verify_frames = 3;
   double relocalization_max_step_m = 0.05;   // m, camera-centre deviation allowed while verifying
   double relocalization_max_step_deg = 5.0;  // deg, rotation deviation allowed while verifying
+  // Atlas (docs/robustness.md "New maps and merging"): after this many consecutive frames without a
+  // trusted pose, a lost frame that fails to relocalise and has init_min_features depth features starts
+  // a new map, seeded at the last trusted pose; while more than one map is open, tracked frames look for
+  // the other maps' keyframes and merge the newer map into the older one once the pose is verified
+  // (relocalization_verify_frames further frames, the relocalisation limits). 0: never (lost stays lost).
+  int new_map_after_lost_frames = 45;
   opt::PoseOptimizerConfig pose;
   KeyframePolicyConfig keyframes;
   PoseGuardConfig guard;
@@ -81,9 +87,20 @@ struct RelocalizationStats {
   std::size_t rejected_by_consistency = 0;  // ... that did not (back to lost)
 };
 
+// New maps started after long losses and merges of maps (the Atlas), counted per run.
+struct AtlasStats {
+  std::size_t maps_created = 0;      // the first map included (0 when a loaded map is the first)
+  std::size_t merge_candidates = 0;  // another map's keyframe gave a pose (verification started)
+  std::size_t merges = 0;            // ... verified and merged
+  std::size_t merges_rejected = 0;   // ... whose next frames did not agree (or were lost)
+};
+
 // Relocalisation candidates from anywhere in the map (a BoW keyframe database, a whole-image score),
 // best first. Called with the tracker's map view held: it must not take the map lock itself.
 using RelocalizationCandidates = std::function<std::vector<map::KeyframeId>(map::MapView&, const Frame&)>;
+// The same query restricted to keyframes of maps other than `current` (map merging), best first.
+using OtherMapCandidates =
+    std::function<std::vector<map::KeyframeId>(map::MapView&, const Frame&, map::MapId current)>;
 
 class Tracker {
  public:
@@ -102,6 +119,9 @@ class Tracker {
   void set_relocalization_candidates(RelocalizationCandidates provider) {
     reloc_candidates_ = std::move(provider);
   }
+  // Candidates in other maps for merging (unset: the relocalisation provider's, filtered, else each
+  // other map's newest keyframes).
+  void set_other_map_candidates(OtherMapCandidates provider) { other_map_candidates_ = std::move(provider); }
   [[nodiscard]] std::optional<std::size_t> first_relocalization_frame() const { return first_reloc_frame_; }
 
   [[nodiscard]] TrackingState state() const { return state_; }
@@ -109,6 +129,11 @@ class Tracker {
   // Relocalisations accepted (verified).
   [[nodiscard]] std::size_t relocalizations() const { return relocalizations_; }
   [[nodiscard]] const RelocalizationStats& relocalization_stats() const { return reloc_stats_; }
+  [[nodiscard]] const AtlasStats& atlas_stats() const { return atlas_stats_; }
+  // The map the tracker works in (after a merge: the map it was merged into).
+  [[nodiscard]] map::MapId current_map() const { return current_map_; }
+  // Maps holding keyframes that were not merged into another, ascending (map 0 first).
+  [[nodiscard]] const std::vector<map::MapId>& open_maps() const { return open_maps_; }
   [[nodiscard]] const PoseGuardStats& guard_stats() const { return guard_stats_; }
   [[nodiscard]] const AnchorRefinerStats& subpixel_stats() const { return refiner_.stats(); }
   [[nodiscard]] const TrajectoryRecorder& trajectory() const { return trajectory_; }
@@ -124,6 +149,18 @@ class Tracker {
   bool track_motion_model(Frame& frame);
   bool track_reference_keyframe(Frame& frame);
   bool relocalize(Frame& frame);
+  // Relocalisation's search: the first candidate keyframe that gives the frame a pose with
+  // min_inliers_after_reloc local-map inliers (frame.T_cw, matches and the local map set), or kNoKeyframe.
+  map::KeyframeId locate(map::MapView& view, Frame& frame, const std::vector<map::KeyframeId>& candidates,
+                         PointCounterUpdates& counters);
+  // Atlas: a lost frame starts a new map when lost long enough (TrackerConfig::new_map_after_lost_frames).
+  [[nodiscard]] bool new_map_due(const Frame& frame) const;
+  void start_new_map(Frame& frame, TrackOutcome& out);
+  // Atlas: a trusted frame of one of several open maps looks for the other maps' keyframes; a pose there
+  // verified over the next frames merges the newer map into the older one.
+  void look_for_other_maps(Frame& frame);
+  // The tail of track_frame: outcome state, outliers dropped, last frame kept.
+  TrackOutcome finish_frame(Frame& frame, TrackOutcome& out);
   // One frame of the check after a relocalisation: true while the frame agrees with the relocalised
   // pose's motion (see TrackerConfig::relocalization_verify_frames).
   [[nodiscard]] bool consistent_after_relocalization(const Frame& frame, const geo::SE3& expected_T_cw) const;
@@ -185,7 +222,23 @@ class Tracker {
   std::vector<TrajectoryEntry> unverified_;  // frames tracked since then, written once verified
   RelocalizationStats reloc_stats_;
   RelocalizationCandidates reloc_candidates_;
+  OtherMapCandidates other_map_candidates_;
   std::optional<std::size_t> first_reloc_frame_;
+  // Atlas state.
+  map::MapId current_map_ = map::kFirstMap;
+  std::uint32_t next_map_ = 0;         // the id the next new map gets
+  std::vector<map::MapId> open_maps_;  // maps not merged into another
+  std::size_t lost_streak_ = 0;        // frames since the last trusted (written) one
+  std::optional<geo::SE3> last_trusted_T_cw_;
+  struct PendingMerge {
+    map::MapId other = map::kFirstMap;
+    map::KeyframeId match = map::kNoKeyframe;
+    geo::SE3 S_other_cur;  // p_other = S * p_current
+    int left = 0;          // frames still to agree
+    std::size_t last_frame = 0;
+  };
+  std::optional<PendingMerge> pending_merge_;
+  AtlasStats atlas_stats_;
   TrajectoryRecorder trajectory_;
   PoseGuardRules guard_;
   PoseGuardStats guard_stats_;

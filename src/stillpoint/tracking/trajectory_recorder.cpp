@@ -13,7 +13,7 @@ std::vector<ResolvedPose> TrajectoryRecorder::resolve(map::MapView& view) const 
       ref = view.keyframe(ref->parent);
     }
     if (ref == nullptr) continue;
-    out.push_back({e.stamp, (T_c_ref * ref->T_cw).inverse()});
+    out.push_back({e.stamp, (T_c_ref * ref->T_cw).inverse(), ref->map_id});
   }
   return out;
 }

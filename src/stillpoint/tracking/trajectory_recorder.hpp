@@ -18,6 +18,9 @@ struct TrajectoryEntry {
 struct ResolvedPose {
   double stamp = 0;
   geo::SE3 T_wc;
+  // The map of the keyframe the pose resolved through, as it is now: after a merge, the map merged into
+  // (the pose is then in its frame); a map never merged has its own frame.
+  map::MapId map_id = map::kFirstMap;
 };
 
 class TrajectoryRecorder {

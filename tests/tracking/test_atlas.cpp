@@ -1,0 +1,221 @@
+// New maps after a long loss and map merging (the Atlas, docs/robustness.md "New maps and merging"), on
+// a small generated world: points with unique random descriptors, frames made of their exact
+// projections, no images. The tracker maps one place, is carried to a place it never saw (no
+// relocalisation possible), starts a new map there after the configured number of lost frames, and
+// walks back; once a frame is found in the first map as well (and the next frames agree), the new map
+// is moved into the first map's frame and merged.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <map>
+#include <random>
+
+#include "stillpoint/common/error.hpp"
+#include "stillpoint/tracking/tracker.hpp"
+
+namespace sp::track {
+namespace {
+
+struct World {
+  std::vector<Eigen::Vector3d> points;
+  cv::Mat descriptors;  // one row per point
+};
+
+// Points in x in [x0, x1), y in [-1.8, 1.8], z in [2, 4] ahead of a camera looking down +z.
+void add_points(World& w, int n, double x0, double x1, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> x(x0, x1), y(-1.8, 1.8), z(2.0, 4.0);
+  std::uniform_int_distribution<int> byte(0, 255);
+  cv::Mat d(n, 32, CV_8U);
+  for (int i = 0; i < n; ++i) {
+    w.points.emplace_back(x(rng), y(rng), z(rng));
+    for (int b = 0; b < 32; ++b) d.at<std::uint8_t>(i, b) = static_cast<std::uint8_t>(byte(rng));
+  }
+  if (w.descriptors.empty()) {
+    w.descriptors = d;
+  } else {
+    cv::vconcat(w.descriptors, d, w.descriptors);
+  }
+}
+
+geo::SE3 camera_at(double x) { return geo::SE3(Eigen::Quaterniond::Identity(), Eigen::Vector3d(-x, 0, 0)); }
+
+Frame observe(const World& w, double x, std::size_t index, const geo::CameraIntrinsics& cam, double bf) {
+  const geo::SE3 T_cw = camera_at(x);
+  Frame f;
+  f.index = index;
+  f.stamp = static_cast<double>(index) / 30.0;
+  std::vector<int> rows;
+  for (std::size_t i = 0; i < w.points.size(); ++i) {
+    const Eigen::Vector3d p = T_cw * w.points[i];
+    if (p.z() < 0.5) continue;
+    const Eigen::Vector2d uv = cam.project(p);
+    if (uv.x() < 20 || uv.y() < 20 || uv.x() > cam.width - 20 || uv.y() > cam.height - 20) continue;
+    f.features.keypoints.emplace_back(static_cast<float>(uv.x()), static_cast<float>(uv.y()), 31.f, 0.f, 1.f,
+                                      0);
+    f.features.depth.push_back(static_cast<float>(p.z()));
+    f.features.u_right.push_back(static_cast<float>(uv.x() - bf / p.z()));
+    rows.push_back(static_cast<int>(i));
+  }
+  f.features.descriptors = cv::Mat(static_cast<int>(rows.size()), 32, CV_8U);
+  for (std::size_t k = 0; k < rows.size(); ++k)
+    w.descriptors.row(rows[k]).copyTo(f.features.descriptors.row(static_cast<int>(k)));
+  f.extracted = rows.size();
+  return f;
+}
+
+class Atlas : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    config_.keyframes.policy = "heuristic";
+    config_.new_map_after_lost_frames = kLostBeforeNewMap;
+    add_points(world_, 1500, -2.5, 2.5, 3);   // the first place
+    add_points(world_, 3000, 2.5, 12.5, 11);  // the rest of the wall: never seen before the kidnap
+  }
+  std::unique_ptr<Tracker> make_tracker() {
+    return std::make_unique<Tracker>(map_, config_, cam_, depth_, map::ScalePyramid::make(8, 1.2), 30.0);
+  }
+  TrackOutcome feed(Tracker& t, std::size_t index, double x) {
+    truth_[index] = x;
+    Frame f = observe(world_, x, index, cam_, depth_.bf);
+    return t.track(f, {});
+  }
+
+  static constexpr int kLostBeforeNewMap = 10;
+  map::Map map_;
+  TrackerConfig config_;
+  geo::CameraIntrinsics cam_;
+  DepthModel depth_;
+  World world_;
+  std::map<std::size_t, double> truth_;  // frame index -> true camera x
+};
+
+TEST_F(Atlas, LostInAnUnmappedPlaceStartsANewMapThatMergesWhenTheOldMapIsSeenAgain) {
+  auto t = make_tracker();
+  std::size_t i = 0;
+  for (; i < 40; ++i) ASSERT_EQ(feed(*t, i, 0.02 * static_cast<double>(i)).state, TrackingState::Ok) << i;
+  ASSERT_EQ(t->atlas_stats().maps_created, 1u);
+
+  // Carried to x = 9 m: nothing of the first map in view, so relocalisation fails on every frame.
+  double x = 9.0;
+  for (; i < 40 + kLostBeforeNewMap; ++i, x -= 0.02) {
+    const TrackOutcome o = feed(*t, i, x);
+    ASSERT_EQ(o.state, TrackingState::Lost) << i;
+    EXPECT_FALSE(o.relocalized) << i;
+  }
+  EXPECT_EQ(t->atlas_stats().maps_created, 1u);  // not before the configured number of lost frames
+  const TrackOutcome started = feed(*t, i++, x);
+  x -= 0.02;
+  EXPECT_EQ(started.state, TrackingState::Ok);
+  EXPECT_NE(started.new_keyframe, map::kNoKeyframe);
+  EXPECT_EQ(t->atlas_stats().maps_created, 2u);
+  EXPECT_EQ(t->current_map(), map::MapId{1});
+  ASSERT_EQ(t->open_maps().size(), 2u);
+  {
+    map::MapReader view = map_.reader();
+    EXPECT_EQ(view.keyframe(started.new_keyframe)->map_id, map::MapId{1});
+    // Seeded at the last trusted pose (x = 0.78), not where the camera is.
+    EXPECT_NEAR(view.keyframe(started.new_keyframe)->camera_center().x(), 0.78, 1e-3);
+  }
+
+  // Walking back towards the first place at 4 cm a frame, tracked in map 1, until the maps merge.
+  std::size_t merged_at = 0;
+  std::vector<map::KeyframeId> made_in_map1{started.new_keyframe};
+  for (; x > 1.0; ++i, x -= 0.04) {
+    const TrackOutcome o = feed(*t, i, x);
+    ASSERT_EQ(o.state, TrackingState::Ok) << "frame " << i << " x " << x;
+    if (merged_at == 0 && o.new_keyframe != map::kNoKeyframe) made_in_map1.push_back(o.new_keyframe);
+    if (merged_at == 0 && t->atlas_stats().merges == 1) merged_at = i;
+  }
+  ASSERT_NE(merged_at, 0u) << "never merged";
+  EXPECT_GT(truth_[merged_at], 2.0);  // merged as soon as enough of the first map was in view
+  EXPECT_EQ(t->atlas_stats().merges, 1u);
+  EXPECT_EQ(t->atlas_stats().merge_candidates, 1u);
+  EXPECT_EQ(t->atlas_stats().merges_rejected, 0u);
+  EXPECT_EQ(t->current_map(), map::kFirstMap);
+  EXPECT_EQ(t->open_maps(), std::vector<map::MapId>{map::kFirstMap});
+  EXPECT_EQ(t->lost_frames(), static_cast<std::size_t>(kLostBeforeNewMap));
+
+  map::MapView view = map_.view();
+  EXPECT_EQ(view.live_maps(), std::vector<map::MapId>{map::kFirstMap});
+  double worst_m = 0, worst_deg = 0;
+  for (map::KeyframeId k : made_in_map1) {
+    const map::Keyframe* kf = view.keyframe(k);
+    const PoseDeviation d = pose_deviation(kf->T_cw, camera_at(truth_.at(kf->frame_index)));
+    worst_m = std::max(worst_m, d.translation_m);
+    worst_deg = std::max(worst_deg, d.rotation_deg);
+  }
+  std::printf(
+      "[ atlas    ] merged at frame %zu (camera at x = %.2f m), %zu keyframes of map 1, worst %.3f mm / %.4f "
+      "deg\n",
+      merged_at, truth_[merged_at], made_in_map1.size(), worst_m * 1000, worst_deg);
+  // Every keyframe of the merged map now sits where the camera was, in the first map's frame.
+  for (const auto& [kid, kf] : view.keyframes()) {
+    EXPECT_EQ(kf.map_id, map::kFirstMap) << kid;
+    const geo::SE3 truth = camera_at(truth_.at(kf.frame_index));
+    const PoseDeviation d = pose_deviation(kf.T_cw, truth);
+    EXPECT_LT(d.translation_m, 0.005) << "keyframe " << kid << " frame " << kf.frame_index;
+    EXPECT_LT(d.rotation_deg, 0.1) << "keyframe " << kid;
+  }
+  EXPECT_GE(made_in_map1.size(), 3u);  // the new map's keyframes are among them
+  for (map::KeyframeId k : made_in_map1) EXPECT_NE(view.keyframe(k), nullptr) << k;
+  // And every written frame, the new map's included, resolves to its true place in map 0.
+  const auto poses = t->trajectory().resolve(view);
+  EXPECT_EQ(poses.size(), truth_.size() - static_cast<std::size_t>(kLostBeforeNewMap));
+  for (const auto& p : poses) {
+    const auto index = static_cast<std::size_t>(std::lround(p.stamp * 30.0));
+    EXPECT_EQ(p.map_id, map::kFirstMap);
+    EXPECT_NEAR(p.T_wc.translation().x(), truth_.at(index), 0.005) << index;
+    EXPECT_NEAR(p.T_wc.translation().y(), 0.0, 0.005) << index;
+    EXPECT_NEAR(p.T_wc.translation().z(), 0.0, 0.005) << index;
+  }
+}
+
+TEST_F(Atlas, ZeroKeepsTheOldBehaviourLostStaysLost) {
+  config_.new_map_after_lost_frames = 0;
+  auto t = make_tracker();
+  std::size_t i = 0;
+  for (; i < 40; ++i) ASSERT_EQ(feed(*t, i, 0.02 * static_cast<double>(i)).state, TrackingState::Ok) << i;
+  double x = 9.0;
+  for (; i < 100; ++i, x -= 0.02) EXPECT_EQ(feed(*t, i, x).state, TrackingState::Lost) << i;
+  EXPECT_EQ(t->atlas_stats().maps_created, 1u);
+  EXPECT_EQ(t->lost_frames(), 60u);
+  EXPECT_EQ(t->open_maps().size(), 1u);
+}
+
+TEST_F(Atlas, NoNewMapFromAFrameWithTooFewDepthFeatures) {
+  auto t = make_tracker();
+  std::size_t i = 0;
+  for (; i < 40; ++i) ASSERT_EQ(feed(*t, i, 0.02 * static_cast<double>(i)).state, TrackingState::Ok) << i;
+  // Lost twice as long as needed, but every frame keeps only 100 features (init_min_features is 200).
+  for (; i < 40 + 2 * kLostBeforeNewMap; ++i) {
+    Frame f = observe(world_, 9.0, i, cam_, depth_.bf);
+    const int keep = 100;
+    f.features.keypoints.resize(keep);
+    f.features.depth.resize(keep);
+    f.features.u_right.resize(keep);
+    f.features.descriptors = f.features.descriptors.rowRange(0, keep).clone();
+    f.extracted = keep;
+    EXPECT_EQ(t->track(f, {}).state, TrackingState::Lost) << i;
+  }
+  EXPECT_EQ(t->atlas_stats().maps_created, 1u);
+  // The first full frame starts the map at once.
+  EXPECT_EQ(feed(*t, i, 9.0).state, TrackingState::Ok);
+  EXPECT_EQ(t->atlas_stats().maps_created, 2u);
+  EXPECT_EQ(t->current_map(), map::MapId{1});
+}
+
+TEST(AtlasConfig, KeyIsReadAndRangeChecked) {
+  EXPECT_EQ(TrackerConfig{}.new_map_after_lost_frames, 45);
+  const TrackerConfig c =
+      TrackerConfig::from_yaml(ConfigReader::from_string("new_map_after_lost_frames: 0\n", "tracking.yaml"));
+  EXPECT_EQ(c.new_map_after_lost_frames, 0);
+  EXPECT_THROW(
+      TrackerConfig::from_yaml(ConfigReader::from_string("new_map_after_lost_frames: -1\n", "t.yaml")),
+      ConfigError);
+}
+
+}  // namespace
+}  // namespace sp::track
