@@ -57,7 +57,7 @@ TEST(PoseGuard, JumpedFrameMakesAKeyframeOnlyWhenTrackingRunsOut) {
   EXPECT_FALSE(g.keyframe_despite_jump(75, 300));
   EXPECT_FALSE(g.keyframe_despite_jump(250, 300));
   EXPECT_FALSE(g.keyframe_despite_jump(0, 0));  // no reference points: nothing says tracking runs out
-  c.keyframe_below_reference_share = 0.0;  // the first version: a jump always vetoes
+  c.keyframe_below_reference_share = 0.0;       // the first version: a jump always vetoes
   EXPECT_FALSE(PoseGuardRules(c).keyframe_despite_jump(1, 300));
 }
 

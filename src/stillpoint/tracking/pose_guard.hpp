@@ -23,9 +23,9 @@ struct PoseGuardConfig {
 };
 
 struct PoseGuardStats {
-  std::size_t jumps = 0;             // frames that jumped with suspect inliers
-  std::size_t resolved = 0;          // ... whose pose was replaced by the solve without them
-  std::size_t keyframes_vetoed = 0;  // keyframes not made because the frame jumped
+  std::size_t jumps = 0;                   // frames that jumped with suspect inliers
+  std::size_t resolved = 0;                // ... whose pose was replaced by the solve without them
+  std::size_t keyframes_vetoed = 0;        // keyframes not made because the frame jumped
   std::size_t keyframes_despite_jump = 0;  // keyframes made from a jumped frame, tracking running out
 };
 
