@@ -50,6 +50,10 @@ export TSAN_OPTIONS="exitcode=$SAN_EXIT:halt_on_error=1:second_deadlock_stack=1:
 # in "<unknown module>" and cannot be suppressed by name. They run without leak detection (ASan's
 # memory checks stay on).
 NO_LEAK_TESTS='OpenNI2Source\.(NoDeviceGivesAClearError|MissingRecordingNamesTheUri)'
+# Left out of the ASan run for time only: the 7-Scenes map-merge fault test takes ~440 s under ASan
+# (33 s in Release); the merge code runs under ASan in Atlas.* and MapMerge.* and in the unseen-place
+# fault test, which stay in.
+ASAN_SKIP_TESTS='Faults\.KidnappedCameraWalkingBackIntoTheOldMapIsMerged'
 REPORT_RE='ERROR: AddressSanitizer|ERROR: LeakSanitizer|WARNING: ThreadSanitizer|ThreadSanitizer: |runtime error:|SUMMARY: [A-Za-z]*Sanitizer'
 
 status=0
@@ -112,7 +116,7 @@ for kind in "${MODES[@]}"; do
   if [ "$kind" = address ]; then
     build="$ROOT/build-asan"
     targets=()  # all: every unit test of the modules above and the CLI
-    tests=(-E "$NO_LEAK_TESTS")
+    tests=(-E "$NO_LEAK_TESTS|$ASAN_SKIP_TESTS")
   else
     build="$ROOT/build-tsan"
     targets=("${TSAN_TARGETS[@]}")
