@@ -12,16 +12,14 @@
 #include <map>
 #include <random>
 
+#include "../support/synthetic_frame.hpp"
 #include "stillpoint/common/error.hpp"
 #include "stillpoint/tracking/tracker.hpp"
 
 namespace sp::track {
 namespace {
 
-struct World {
-  std::vector<Eigen::Vector3d> points;
-  cv::Mat descriptors;  // one row per point
-};
+using World = testing::SyntheticScene;
 
 // Points in x in [x0, x1), y in [-1.8, 1.8], z in [2, 4] ahead of a camera looking down +z.
 void add_points(World& w, int n, double x0, double x1, unsigned seed) {
@@ -42,30 +40,6 @@ void add_points(World& w, int n, double x0, double x1, unsigned seed) {
 
 geo::SE3 camera_at(double x) { return geo::SE3(Eigen::Quaterniond::Identity(), Eigen::Vector3d(-x, 0, 0)); }
 
-Frame observe(const World& w, double x, std::size_t index, const geo::CameraIntrinsics& cam, double bf) {
-  const geo::SE3 T_cw = camera_at(x);
-  Frame f;
-  f.index = index;
-  f.stamp = static_cast<double>(index) / 30.0;
-  std::vector<int> rows;
-  for (std::size_t i = 0; i < w.points.size(); ++i) {
-    const Eigen::Vector3d p = T_cw * w.points[i];
-    if (p.z() < 0.5) continue;
-    const Eigen::Vector2d uv = cam.project(p);
-    if (uv.x() < 20 || uv.y() < 20 || uv.x() > cam.width - 20 || uv.y() > cam.height - 20) continue;
-    f.features.keypoints.emplace_back(static_cast<float>(uv.x()), static_cast<float>(uv.y()), 31.f, 0.f, 1.f,
-                                      0);
-    f.features.depth.push_back(static_cast<float>(p.z()));
-    f.features.u_right.push_back(static_cast<float>(uv.x() - bf / p.z()));
-    rows.push_back(static_cast<int>(i));
-  }
-  f.features.descriptors = cv::Mat(static_cast<int>(rows.size()), 32, CV_8U);
-  for (std::size_t k = 0; k < rows.size(); ++k)
-    w.descriptors.row(rows[k]).copyTo(f.features.descriptors.row(static_cast<int>(k)));
-  f.extracted = rows.size();
-  return f;
-}
-
 class Atlas : public ::testing::Test {
  protected:
   void SetUp() override {
@@ -79,7 +53,7 @@ class Atlas : public ::testing::Test {
   }
   TrackOutcome feed(Tracker& t, std::size_t index, double x) {
     truth_[index] = x;
-    Frame f = observe(world_, x, index, cam_, depth_.bf);
+    Frame f = testing::synthetic_frame(world_, camera_at(x), index, cam_, depth_.bf);
     return t.track(f, {});
   }
 
@@ -191,7 +165,7 @@ TEST_F(Atlas, NoNewMapFromAFrameWithTooFewDepthFeatures) {
   for (; i < 40; ++i) ASSERT_EQ(feed(*t, i, 0.02 * static_cast<double>(i)).state, TrackingState::Ok) << i;
   // Lost twice as long as needed, but every frame keeps only 100 features (init_min_features is 200).
   for (; i < 40 + 2 * kLostBeforeNewMap; ++i) {
-    Frame f = observe(world_, 9.0, i, cam_, depth_.bf);
+    Frame f = testing::synthetic_frame(world_, camera_at(9.0), i, cam_, depth_.bf);
     const int keep = 100;
     f.features.keypoints.resize(keep);
     f.features.depth.resize(keep);

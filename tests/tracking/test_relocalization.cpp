@@ -8,16 +8,14 @@
 
 #include <random>
 
+#include "../support/synthetic_frame.hpp"
 #include "stillpoint/common/error.hpp"
 #include "stillpoint/tracking/tracker.hpp"
 
 namespace sp::track {
 namespace {
 
-struct Scene {
-  std::vector<Eigen::Vector3d> points;
-  cv::Mat descriptors;  // one row per point
-};
+using Scene = testing::SyntheticScene;
 
 Scene make_scene(int n, unsigned seed) {
   std::mt19937 rng(seed);
@@ -34,30 +32,6 @@ Scene make_scene(int n, unsigned seed) {
 
 // The camera looks down +z from (x, 0, 0): T_cw is a pure translation by -x.
 geo::SE3 camera_at(double x) { return geo::SE3(Eigen::Quaterniond::Identity(), Eigen::Vector3d(-x, 0, 0)); }
-
-Frame observe(const Scene& s, const geo::SE3& T_cw, std::size_t index, const geo::CameraIntrinsics& cam,
-              double bf) {
-  Frame f;
-  f.index = index;
-  f.stamp = static_cast<double>(index) / 30.0;
-  std::vector<int> rows;
-  for (std::size_t i = 0; i < s.points.size(); ++i) {
-    const Eigen::Vector3d p = T_cw * s.points[i];
-    if (p.z() < 0.5) continue;
-    const Eigen::Vector2d uv = cam.project(p);
-    if (uv.x() < 20 || uv.y() < 20 || uv.x() > cam.width - 20 || uv.y() > cam.height - 20) continue;
-    f.features.keypoints.emplace_back(static_cast<float>(uv.x()), static_cast<float>(uv.y()), 31.f, 0.f, 1.f,
-                                      0);
-    f.features.depth.push_back(static_cast<float>(p.z()));
-    f.features.u_right.push_back(static_cast<float>(uv.x() - bf / p.z()));
-    rows.push_back(static_cast<int>(i));
-  }
-  f.features.descriptors = cv::Mat(static_cast<int>(rows.size()), 32, CV_8U);
-  for (std::size_t k = 0; k < rows.size(); ++k)
-    s.descriptors.row(rows[k]).copyTo(f.features.descriptors.row(static_cast<int>(k)));
-  f.extracted = rows.size();
-  return f;
-}
 
 Frame blank(std::size_t index) {
   Frame f;
@@ -79,13 +53,13 @@ class Relocalization : public ::testing::Test {
   // Tracks frames 0..n-1 along x from 0 to `to` metres; all must be tracked.
   void build_map(Tracker& t, std::size_t n, double to) {
     for (std::size_t i = 0; i < n; ++i) {
-      Frame f = observe(scene_, camera_at(to * static_cast<double>(i) / static_cast<double>(n - 1)), i, cam_,
-                        depth_.bf);
+      Frame f = testing::synthetic_frame(
+          scene_, camera_at(to * static_cast<double>(i) / static_cast<double>(n - 1)), i, cam_, depth_.bf);
       ASSERT_EQ(t.track(f, {}).state, TrackingState::Ok) << "frame " << i;
     }
   }
   TrackOutcome feed(Tracker& t, std::size_t index, double x) {
-    Frame f = observe(scene_, camera_at(x), index, cam_, depth_.bf);
+    Frame f = testing::synthetic_frame(scene_, camera_at(x), index, cam_, depth_.bf);
     return t.track(f, {});
   }
   [[nodiscard]] double x_of(const Tracker& t, std::size_t frame_index) {

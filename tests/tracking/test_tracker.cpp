@@ -7,7 +7,7 @@
 #include <algorithm>
 #include <chrono>
 
-#include "../support/synthetic_map.hpp"
+#include "../support/synthetic_frame.hpp"
 #include "stillpoint/tracking/tracker.hpp"
 
 namespace sp::track {
@@ -17,16 +17,6 @@ namespace {
 geo::SE3 path_pose(std::size_t i) {
   const double s = static_cast<double>(i);
   return testing::camera_pose(Eigen::Vector3d(0.01 * s, 0.0, 0.0), 0.3 * s * M_PI / 180.0);
-}
-
-Frame make_frame(const testing::SyntheticScene& scene, const geo::SE3& T_cw, std::size_t index,
-                 const geo::CameraIntrinsics& cam, double bf) {
-  Frame f;
-  f.index = index;
-  f.stamp = static_cast<double>(index) / 30.0;
-  f.features = testing::observe(scene, T_cw, cam, bf).features;
-  f.extracted = f.features.size();
-  return f;
 }
 
 class TrackerTest : public ::testing::Test {
@@ -58,7 +48,7 @@ TEST_F(TrackerTest, RecoversEveryPoseOfAKnownPath) {
   auto t = make_tracker();
   constexpr std::size_t kFrames = 60;
   for (std::size_t i = 0; i < kFrames; ++i) {
-    Frame f = make_frame(scene_, path_pose(i), i, cam_, depth_.bf);
+    Frame f = testing::synthetic_frame(scene_, path_pose(i), i, cam_, depth_.bf);
     ASSERT_EQ(t->track(f, {}).state, TrackingState::Ok) << "frame " << i;
   }
   // The first frame is the map's origin, as the path's: poses compare without alignment.
@@ -76,7 +66,7 @@ TEST_F(TrackerTest, RecoversEveryPoseOfAKnownPath) {
 // depth reading, far ones too; later keyframes only of the close ones (at least new_points_min). The
 // slab spans 2-4 m around the 3.2 m close-depth limit, so the two rules must give different maps.
 TEST_F(TrackerTest, TheFirstKeyframeMakesAPointOfEveryFeatureWithDepth) {
-  const Frame probe = make_frame(scene_, path_pose(0), 0, cam_, depth_.bf);
+  const Frame probe = testing::synthetic_frame(scene_, path_pose(0), 0, cam_, depth_.bf);
   const auto with_depth = static_cast<std::size_t>(
       std::count_if(probe.features.depth.begin(), probe.features.depth.end(), [](float d) { return d > 0; }));
   const auto close =
@@ -89,7 +79,7 @@ TEST_F(TrackerTest, TheFirstKeyframeMakesAPointOfEveryFeatureWithDepth) {
     map::Map map;
     config_.init_all_depth_points = all;
     Tracker t(map, config_, cam_, depth_, pyramid_, 30.0);
-    Frame f = make_frame(scene_, path_pose(0), 0, cam_, depth_.bf);
+    Frame f = testing::synthetic_frame(scene_, path_pose(0), 0, cam_, depth_.bf);
     ASSERT_EQ(t.track(f, {}).state, TrackingState::Ok);
     map::MapView view = map.view();
     EXPECT_EQ(view.live_points(), all ? with_depth : close) << "init_all_depth_points " << all;
@@ -113,7 +103,7 @@ TEST_F(TrackerTest, FindsItsPoseInAGivenMapAndTracksOn) {
     return testing::camera_pose(Eigen::Vector3d(0.23 + 0.01 * static_cast<double>(i), 0.02, 0.0), 0.01);
   };
   for (std::size_t i = 0; i < 10; ++i) {
-    Frame f = make_frame(scene_, truth(i), i, cam_, depth_.bf);
+    Frame f = testing::synthetic_frame(scene_, truth(i), i, cam_, depth_.bf);
     const TrackOutcome o = t->track(f, {});
     ASSERT_EQ(o.state, TrackingState::Ok) << "frame " << i;
     EXPECT_EQ(o.relocalized, i == 0) << "frame " << i;
@@ -136,7 +126,7 @@ TEST_F(TrackerTest, ASuddenStopIsTrackedAtTheTruePose) {
         Eigen::Vector3d(0.02 * static_cast<double>(std::min<std::size_t>(i, 15)), 0, 0), 0);
   };
   for (std::size_t i = 0; i < 20; ++i) {
-    Frame f = make_frame(scene_, truth(i), i, cam_, depth_.bf);
+    Frame f = testing::synthetic_frame(scene_, truth(i), i, cam_, depth_.bf);
     ASSERT_EQ(t->track(f, {}).state, TrackingState::Ok) << "frame " << i;
   }
   for (std::size_t i = 14; i < 20; ++i) {
@@ -149,7 +139,7 @@ TEST_F(TrackerTest, ASuddenStopIsTrackedAtTheTruePose) {
 TEST_F(TrackerTest, ReportsHowLongEachFrameHeldTheMapLock) {
   auto t = make_tracker();
   for (std::size_t i = 0; i < 10; ++i) {
-    Frame f = make_frame(scene_, path_pose(i), i, cam_, depth_.bf);
+    Frame f = testing::synthetic_frame(scene_, path_pose(i), i, cam_, depth_.bf);
     const auto start = std::chrono::steady_clock::now();
     ASSERT_EQ(t->track(f, {}).state, TrackingState::Ok) << "frame " << i;
     const double wall_ms =
