@@ -68,6 +68,12 @@ std::optional<Detections> AsyncDetector::wait_for(std::size_t frame_index, std::
   std::unique_lock lock(mutex_);
   done_.wait_for(lock, budget,
                  [&] { return stopped_ || error_ || (latest_ && latest_->frame_index >= frame_index); });
+  // A failure that woke the wait reaches the caller now, not one call later.
+  if (error_) {
+    const std::exception_ptr e = std::exchange(error_, nullptr);
+    lock.unlock();
+    std::rethrow_exception(e);
+  }
   return latest_;
 }
 

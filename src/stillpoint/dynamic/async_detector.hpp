@@ -41,7 +41,8 @@ class AsyncDetector {
   [[nodiscard]] std::optional<Detections> latest() const;
 
   // Waits at most `budget` until the detection of `frame_index` (or a newer frame) is done, then
-  // returns the latest available one (possibly older; nullopt if none finished yet).
+  // returns the latest available one (possibly older; nullopt if none finished yet). A detector
+  // failure, before or during the wait, is rethrown here (once).
   std::optional<Detections> wait_for(std::size_t frame_index, std::chrono::milliseconds budget);
 
   // wait_for(frame_index, budget); then, when the result is more than `max_age` frames older than
