@@ -108,6 +108,13 @@ TEST_F(Atlas, LostInAnUnmappedPlaceStartsANewMapThatMergesWhenTheOldMapIsSeenAga
   EXPECT_EQ(t->atlas_stats().merges, 1u);
   EXPECT_EQ(t->atlas_stats().merge_candidates, 1u);
   EXPECT_EQ(t->atlas_stats().merges_rejected, 0u);
+  // While both maps were open a new search ran only every merge_search_interval-th frame (the frames
+  // verifying the candidate are not new searches).
+  const std::size_t open_frames = merged_at - (40 + kLostBeforeNewMap);
+  ASSERT_GT(config_.merge_search_interval, 1);
+  EXPECT_GE(t->atlas_stats().merge_searches, 1u);
+  EXPECT_LE(t->atlas_stats().merge_searches,
+            open_frames / static_cast<std::size_t>(config_.merge_search_interval) + 1);
   EXPECT_EQ(t->current_map(), map::kFirstMap);
   EXPECT_EQ(t->open_maps(), std::vector<map::MapId>{map::kFirstMap});
   EXPECT_EQ(t->lost_frames(), static_cast<std::size_t>(kLostBeforeNewMap));

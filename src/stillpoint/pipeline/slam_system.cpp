@@ -496,6 +496,7 @@ nlohmann::json SlamSystem::statistics() {
     const track::AtlasStats& a = tracker_.atlas_stats();
     j["maps"] = a.maps_created;
     j["merges"] = a.merges;
+    j["merge_searches"] = a.merge_searches;
     j["merge_candidates"] = a.merge_candidates;
     j["merges_rejected"] = a.merges_rejected;
     std::map<std::uint32_t, std::size_t> per_map;

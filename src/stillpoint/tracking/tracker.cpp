@@ -28,6 +28,7 @@ TrackerConfig TrackerConfig::from_yaml(const ConfigReader& r) {
   r.read("relocalization_max_step_m", c.relocalization_max_step_m, 0.001, 10.0);
   r.read("relocalization_max_step_deg", c.relocalization_max_step_deg, 0.01, 180.0);
   r.read("new_map_after_lost_frames", c.new_map_after_lost_frames, 0, 100000);
+  r.read("merge_search_interval", c.merge_search_interval, 1, 10000);
   c.pose = opt::PoseOptimizerConfig::from_yaml(r.section("pose_optimizer"));
   c.keyframes = KeyframePolicyConfig::from_yaml(r.section("keyframes"));
   c.guard = PoseGuardConfig::from_yaml(r.section("pose_guard"));
@@ -206,7 +207,8 @@ TrackOutcome Tracker::track_frame(Frame& frame, const MappingStatus& mapping) {
         spdlog::warn("frame {}: reference keyframe {} missing, pose not written", frame.index, reference_);
       }
       // Never in a run with one map (nothing else to find).
-      if (open_maps_.size() > 1 && verify_left_ == 0 && lost_streak_ == 0) look_for_other_maps(frame);
+      if (open_maps_.size() > 1 && verify_left_ == 0 && lost_streak_ == 0 && merge_search_due(frame.index))
+        look_for_other_maps(frame);
     }
   }
   return finish_frame(frame, out);

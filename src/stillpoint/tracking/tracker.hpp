@@ -53,6 +53,9 @@ struct TrackerConfig {
   // the other maps' keyframes and merge the newer map into the older one once the pose is verified
   // (relocalization_verify_frames further frames, the relocalisation limits). 0: never (lost stays lost).
   int new_map_after_lost_frames = 45;
+  // While several maps are open, a trusted frame looks for the other maps only every this many frames
+  // (the search holds the map lock ~10-50 ms); a candidate found is then verified on every frame. 1: always.
+  int merge_search_interval = 5;
   opt::PoseOptimizerConfig pose;
   KeyframePolicyConfig keyframes;
   PoseGuardConfig guard;
@@ -90,6 +93,7 @@ struct RelocalizationStats {
 // New maps started after long losses and merges of maps (the Atlas), counted per run.
 struct AtlasStats {
   std::size_t maps_created = 0;      // the first map included (0 when a loaded map is the first)
+  std::size_t merge_searches = 0;    // frames that searched the other maps for a new candidate
   std::size_t merge_candidates = 0;  // another map's keyframe gave a pose (verification started)
   std::size_t merges = 0;            // ... verified and merged
   std::size_t merges_rejected = 0;   // ... whose next frames did not agree (or were lost)
@@ -159,6 +163,8 @@ class Tracker {
   // Atlas: a trusted frame of one of several open maps looks for the other maps' keyframes; a pose there
   // verified over the next frames merges the newer map into the older one.
   void look_for_other_maps(Frame& frame);
+  // A merge being verified looks on every frame; a new search waits merge_search_interval frames.
+  bool merge_search_due(std::size_t frame_index);
   // The tail of track_frame: outcome state, outliers dropped, last frame kept.
   TrackOutcome finish_frame(Frame& frame, TrackOutcome& out);
   // One frame of the check after a relocalisation: true while the frame agrees with the relocalised
@@ -238,6 +244,7 @@ class Tracker {
     std::size_t last_frame = 0;
   };
   std::optional<PendingMerge> pending_merge_;
+  std::optional<std::size_t> last_merge_search_frame_;
   AtlasStats atlas_stats_;
   TrajectoryRecorder trajectory_;
   PoseGuardRules guard_;

@@ -159,6 +159,16 @@ void Tracker::start_new_map(Frame& frame, TrackOutcome& out) {
   refiner_.set_anchor(out.new_keyframe, frame);
 }
 
+bool Tracker::merge_search_due(std::size_t frame_index) {
+  if (pending_merge_) return true;
+  if (last_merge_search_frame_ &&
+      frame_index < *last_merge_search_frame_ + static_cast<std::size_t>(config_.merge_search_interval))
+    return false;
+  last_merge_search_frame_ = frame_index;
+  ++atlas_stats_.merge_searches;
+  return true;
+}
+
 void Tracker::look_for_other_maps(Frame& frame) {
   // Rare (only while several maps are open): one view over the search, as relocalisation.
   map::MapView view = map_.view(&lock_clock_);
