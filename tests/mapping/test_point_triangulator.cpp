@@ -172,5 +172,82 @@ TEST(PointTriangulator, InconsistentPyramidLevelsAreRefused) {
   EXPECT_TRUE(triangulator().triangulate(p.v1, p.v2).empty());
 }
 
+cv::Mat flip_bits(const cv::Mat& d, int first, int count) {
+  cv::Mat out = d.clone();
+  for (int b = first; b < first + count; ++b)
+    out.at<std::uint8_t>(0, b / 8) ^= static_cast<std::uint8_t>(1u << (b % 8));
+  return out;
+}
+
+// Repeated texture beyond the depth sensor's range: in view 2 each point has a twin on its epipolar
+// line (where the same ray, 1.6x farther, lands) that looks a little MORE like view 1's corner than the
+// true one does (7 bits off against 8). Neither view has depth, so nothing but the descriptors tells the
+// two apart: the wrong pair triangulates to the twin's place and reprojects exactly onto both features.
+// add_twins puts them into view 2 of p (made without depth) and returns how many.
+int add_twins(Pair& p) {
+  int twins = 0;
+  const geo::CameraIntrinsics cam;
+  const Eigen::Vector3d c1 = p.v1.T_cw.inverse().translation();
+  std::vector<cv::Mat> rows;
+  for (std::size_t i = 0; i < p.scene.points.size(); ++i) {
+    if (p.of1[i] < 0 || p.of2[i] < 0) continue;
+    const Eigen::Vector3d twin = c1 + 1.6 * (p.scene.points[i] - c1);
+    const Eigen::Vector3d twin_c = p.v2.T_cw * twin;
+    const Eigen::Vector2d uv = cam.project(twin_c);
+    if (twin_c.z() <= 0 || !cam.in_image(uv, 1.0)) continue;
+    const auto f2 = static_cast<std::size_t>(p.of2[i]);
+    if ((uv - Eigen::Vector2d(p.f2.keypoints[f2].pt.x, p.f2.keypoints[f2].pt.y)).norm() < 5.0) continue;
+    flip_bits(p.scene.descriptors[i], 0, 8).copyTo(p.f2.descriptors.row(static_cast<int>(f2)));
+    p.f2.keypoints.emplace_back(static_cast<float>(uv.x()), static_cast<float>(uv.y()), 31.f, 0.f, 0.f, 0);
+    p.f2.depth.push_back(-1.f);
+    p.f2.u_right.push_back(-1.f);
+    rows.push_back(flip_bits(p.scene.descriptors[i], 100, 7));
+    ++twins;
+  }
+  rows.insert(rows.begin(), p.f2.descriptors);
+  cv::vconcat(rows, p.f2.descriptors);
+  p.v2.free.assign(p.f2.size(), true);
+  return twins;
+}
+
+int wrong_points(const Pair& p, const std::vector<TriangulatedPoint>& pts) {
+  int wrong = 0;
+  for (const auto& t : pts) {
+    const int i = point_of(p.of1, t.feature1);
+    wrong += i < 0 || (t.position - p.scene.points[static_cast<std::size_t>(i)]).norm() > 1e-3 ? 1 : 0;
+  }
+  return wrong;
+}
+
+TEST(PointTriangulator, AmbiguousMatchesWithoutDepthAreRefused) {
+  const auto none = [](int) { return false; };
+  Pair p = make_pair(pose(0.0, {0, 0, 0}), pose(0.1, {0.4, 0.05, 0.1}), none, none);
+  const int twins = add_twins(p);
+  ASSERT_GT(twins, 50);
+  // The rule off (ratio 1, the matcher before 2026-12-03): the twins win and make wrong points.
+  TriangulationConfig off;
+  off.mono_match_ratio = 1.0;
+  const auto before = PointTriangulator(off, geo::CameraIntrinsics{}, kBf, map::ScalePyramid::make(8, 1.2))
+                          .triangulate(p.v1, p.v2);
+  EXPECT_GT(wrong_points(p, before), twins / 2);
+  // The default: an ambiguous pair makes no point at all.
+  const auto after = triangulator().triangulate(p.v1, p.v2);
+  EXPECT_EQ(wrong_points(p, after), 0);
+  // Points whose twin fell outside the image are still made.
+  EXPECT_GE(static_cast<int>(after.size()), (visible_in_both(p) - twins) * 8 / 10);
+}
+
+TEST(PointTriangulator, DistinctMatchesWithoutDepthStillPassTheRatio) {
+  // Each view-2 corner 12 bits off its view-1 twin, nothing else alike: distinct, all kept.
+  const auto none = [](int) { return false; };
+  Pair p = make_pair(pose(0.0, {0, 0, 0}), pose(0.1, {0.4, 0.05, 0.1}), none, none);
+  for (std::size_t i = 0; i < p.of2.size(); ++i) {
+    if (p.of2[i] >= 0) flip_bits(p.scene.descriptors[i], 40, 12).copyTo(p.f2.descriptors.row(p.of2[i]));
+  }
+  const auto pts = triangulator().triangulate(p.v1, p.v2);
+  EXPECT_GT(static_cast<int>(pts.size()), visible_in_both(p) * 8 / 10);
+  EXPECT_EQ(wrong_points(p, pts), 0);
+}
+
 }  // namespace
 }  // namespace sp::mapping

@@ -68,6 +68,7 @@ TriangulationConfig TriangulationConfig::from_yaml(const ConfigReader& r) {
   r.read("neighbours", c.neighbours, std::size_t{1}, std::size_t{100});
   r.read("max_descriptor_distance", c.max_descriptor_distance, 1, 256);
   r.read("min_parallax_cos", c.min_parallax_cos, 0.9, 1.0);
+  r.read("mono_match_ratio", c.mono_match_ratio, 0.1, 1.0);
   return c;
 }
 
@@ -108,6 +109,8 @@ std::vector<PointTriangulator::Match> PointTriangulator::match_epipolar(const Tr
     const bool depth1 = f1.depth[i] > 0;
     const std::uint8_t* d1 = f1.descriptors.ptr<std::uint8_t>(static_cast<int>(i));
     int best = config_.max_descriptor_distance + 1, best_j = -1;
+    // The runner-up: the second-best distance in the band, or the distance limit when that is lower.
+    int second = 256;
     for (int j : free2) {
       const cv::KeyPoint& kp2 = f2.keypoints[static_cast<std::size_t>(j)];
       const auto level2 = static_cast<std::size_t>(kp2.octave);
@@ -122,11 +125,19 @@ std::vector<PointTriangulator::Match> PointTriangulator::match_epipolar(const Tr
       }
       const int d = feat::hamming_distance(d1, f2.descriptors.ptr<std::uint8_t>(j));
       if (d < best) {
+        second = best;
         best = d;
         best_j = j;
+      } else if (d < second) {
+        second = d;
       }
     }
     if (best_j < 0) continue;
+    // Repeated texture (book spines, tiles) beyond the depth sensor's range: without depth in either
+    // view the best match must stand out from the runner-up along the line (and be well under the limit).
+    if (!depth1 && f2.depth[static_cast<std::size_t>(best_j)] <= 0 &&
+        static_cast<double>(best) > config_.mono_match_ratio * static_cast<double>(second))
+      continue;
     Match& slot = best_for_2[static_cast<std::size_t>(best_j)];
     if (best < slot.distance) slot = Match{static_cast<int>(i), best_j, best};
   }

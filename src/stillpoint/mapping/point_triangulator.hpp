@@ -19,6 +19,11 @@ struct TriangulationConfig {
   std::size_t neighbours = 10;       // best covisible keyframes paired with the new one (ORB-SLAM RGB-D: 10)
   int max_descriptor_distance = 50;  // Hamming, ORB-SLAM's TH_LOW
   double min_parallax_cos = 0.9998;  // rays closer than this (about 1.1 deg) are not triangulated
+  // A match where neither feature has depth must be distinct along its epipolar band: best Hamming
+  // distance <= this share of the second best, or of max_descriptor_distance when that is lower
+  // (Lowe's ratio; 1: off). Nothing else checks such a pair: any two features on the epipolar line
+  // triangulate to a point that reprojects onto both.
+  double mono_match_ratio = 0.7;
   static TriangulationConfig from_yaml(const ConfigReader& r);
 };
 

@@ -151,6 +151,9 @@ TrackOutcome Tracker::track_frame(Frame& frame, const MappingStatus& mapping) {
       }
     }
     const bool jumped = ok && predicted && guard_pose(frame, *predicted);
+    spdlog::trace("frame {}: {} by {}, {} inliers, reference keyframe {}, local map {} keyframes / {} points",
+                  frame.index, ok ? "tracked" : "lost", by_motion ? "motion" : "reference", frame.matched(),
+                  reference_, local_keyframes_.size(), local_points_.size());
 
     // Write back: counters and the keyframe decision, then (in a second view, once the keyframe is
     // drafted without the lock) the keyframe. Points or keyframes other stages culled or fused since
