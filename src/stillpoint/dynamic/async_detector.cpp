@@ -65,16 +65,15 @@ std::optional<Detections> AsyncDetector::wait_for(std::size_t frame_index, std::
     }
     return latest_;
   }
-  std::unique_lock lock(mutex_);
-  done_.wait_for(lock, budget,
-                 [&] { return stopped_ || error_ || (latest_ && latest_->frame_index >= frame_index); });
-  // A failure that woke the wait reaches the caller now, not one call later.
-  if (error_) {
-    const std::exception_ptr e = std::exchange(error_, nullptr);
-    lock.unlock();
-    std::rethrow_exception(e);
+  std::optional<Detections> result;
+  {
+    std::unique_lock lock(mutex_);
+    done_.wait_for(lock, budget,
+                   [&] { return stopped_ || error_ || (latest_ && latest_->frame_index >= frame_index); });
+    result = latest_;
   }
-  return latest_;
+  rethrow_worker_error();  // a failure that woke the wait reaches the caller now, not one call later
+  return result;
 }
 
 AsyncDetector::Fresh AsyncDetector::wait_for_fresh(std::size_t frame_index, std::chrono::milliseconds budget,

@@ -151,9 +151,13 @@ TrackOutcome Tracker::track_frame(Frame& frame, const MappingStatus& mapping) {
       }
     }
     const bool jumped = ok && predicted && guard_pose(frame, *predicted);
-    spdlog::trace("frame {}: {} by {}, {} inliers, reference keyframe {}, local map {} keyframes / {} points",
-                  frame.index, ok ? "tracked" : "lost", by_motion ? "motion" : "reference", frame.matched(),
-                  reference_, local_keyframes_.size(), local_points_.size());
+    // Guarded: the arguments (frame.matched() counts every feature) are not worth evaluating per frame.
+    if (spdlog::should_log(spdlog::level::trace)) {
+      spdlog::trace(
+          "frame {}: {} by {}, {} inliers, reference keyframe {}, local map {} keyframes / {} points",
+          frame.index, ok ? "tracked" : "lost", by_motion ? "motion" : "reference", frame.matched(),
+          reference_, local_keyframes_.size(), local_points_.size());
+    }
 
     // Write back: counters and the keyframe decision, then (in a second view, once the keyframe is
     // drafted without the lock) the keyframe. Points or keyframes other stages culled or fused since
