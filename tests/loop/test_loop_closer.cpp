@@ -6,10 +6,13 @@
 // the loop's keyframes must be held against culling between verification and correction.
 #include <gtest/gtest.h>
 
+#include <chrono>
 #include <filesystem>
+#include <future>
 
 #include "../support/synthetic_map.hpp"
 #include "stillpoint/loop/loop_closer.hpp"
+#include "stillpoint/loop/loop_verifier.hpp"
 #include "stillpoint/tracking/pose_guard.hpp"
 
 namespace sp::loop {
@@ -178,6 +181,57 @@ TEST_F(LoopCloserTest, AWrongPlaceIsNotVerified) {
   // Keyframe 24 looks the other way (180 degrees): no common points with the query.
   auto closer = make_closer();
   EXPECT_FALSE(closer->verify(ids_.back(), ids_[24]).has_value());
+}
+
+// Verification reads a copy taken under one short view, so it runs while another stage holds the
+// map lock, and the map changing afterwards does not change its answer.
+TEST_F(LoopCloserTest, VerificationRunsOnItsCopyWhileTheMapIsLocked) {
+  LoopClosingConfig c;
+  const LoopVerifier verifier(
+      LoopVerifierConfig{c.min_descriptor_matches, c.ransac_threshold_m, c.min_ransac_inliers,
+                         c.min_projection_inliers, c.verify_neighbours, c.neighbour_min_inliers, c.drift},
+      cam_, depth_, pyramid_);
+  std::optional<LoopEvidence> evidence;
+  {
+    const map::MapReader view = map_.reader();
+    evidence = gather_evidence(view, ids_.back(), ids_[1]);
+    ASSERT_TRUE(evidence.has_value());
+    ASSERT_TRUE(add_loop_side(view, *evidence, c.verify_neighbours));
+  }
+  finish_evidence(*evidence);
+  EXPECT_FALSE(evidence->neighbours.empty());  // the neighbour check has views to run on
+  std::future<LoopVerification> running;  // declared first: on failure the view is released before the wait
+  {
+    map::MapView view = map_.view();  // held by "another stage" for the whole verification
+    // The map moves on meanwhile: every point 1 m off. The copy keeps the positions it was given.
+    for (const auto& [pid, p] : view.points()) view.point(pid)->position += Eigen::Vector3d(1.0, 0.0, 0.0);
+    running = std::async(std::launch::async, [&] { return verifier.verify(*evidence); });
+    ASSERT_EQ(running.wait_for(std::chrono::seconds(60)), std::future_status::ready)
+        << "verification waited for the map lock";
+  }
+  const LoopVerification result = running.get();
+  ASSERT_TRUE(result.accepted());
+  const track::PoseDeviation d = track::pose_deviation(result.T_query_w, true_pose(kKeyframes - 1));
+  EXPECT_LT(d.translation_m, 0.002);
+  EXPECT_LT(d.rotation_deg, 0.1);
+}
+
+// A keyframe culled between the two copies ends the verification: no loop side is copied for it, and
+// nothing is gathered for a culled keyframe.
+TEST_F(LoopCloserTest, AKeyframeCulledBetweenTheCopiesEndsTheVerification) {
+  std::optional<LoopEvidence> evidence;
+  {
+    const map::MapReader view = map_.reader();
+    evidence = gather_evidence(view, ids_.back(), ids_[1]);
+  }
+  ASSERT_TRUE(evidence.has_value());
+  {
+    map::MapView view = map_.view();  // local mapping culls the match meanwhile
+    ASSERT_TRUE(view.erase_keyframe(ids_[1]));
+  }
+  const map::MapReader view = map_.reader();
+  EXPECT_FALSE(add_loop_side(view, *evidence, 4));
+  EXPECT_FALSE(gather_evidence(view, ids_.back(), ids_[1]).has_value());
 }
 
 TEST_F(LoopCloserTest, DetectsTheLoopFromTheKeyframeStreamAndClosesIt) {

@@ -11,10 +11,7 @@
 
 #include "stillpoint/common/error.hpp"
 #include "stillpoint/common/timing.hpp"
-#include "stillpoint/features/matching.hpp"
-#include "stillpoint/geometry/ransac_se3.hpp"
 #include "stillpoint/optimize/pose_graph.hpp"
-#include "stillpoint/optimize/pose_optimizer.hpp"
 #include "stillpoint/tracking/projection_matcher.hpp"
 
 namespace sp::loop {
@@ -74,7 +71,11 @@ LoopCloser::LoopCloser(map::Map& map, LoopClosingConfig config, std::shared_ptr<
       camera_(camera),
       depth_(depth),
       pyramid_(std::move(pyramid)),
-      deterministic_(deterministic) {
+      deterministic_(deterministic),
+      verifier_(LoopVerifierConfig{config_.min_descriptor_matches, config_.ransac_threshold_m,
+                                   config_.min_ransac_inliers, config_.min_projection_inliers,
+                                   config_.verify_neighbours, config_.neighbour_min_inliers, config_.drift},
+                camera_, depth_, pyramid_) {
   if (config_.detector != "off" && vocabulary_ != nullptr) {
     detector_ = make_loop_detector(config_.detector, config_.detection);
   }
@@ -204,163 +205,56 @@ void LoopCloser::handle_candidates(const std::vector<LoopCandidate>& candidates,
 }
 
 std::optional<LoopCloser::VerifiedLoop> LoopCloser::verify(map::KeyframeId query, map::KeyframeId match) {
-  map::MapView view = map_.view();
-  const map::Keyframe* q = view.keyframe(query);
-  const map::Keyframe* m = view.keyframe(match);
-  if (q == nullptr || m == nullptr || q->bad || m->bad) return std::nullopt;
-  // Another map (not merged yet) has its own frame: no loop, and no drift to measure. The tracker
-  // merges maps (docs/robustness.md "New maps and merging").
-  if (q->map_id != m->map_id) {
-    spdlog::debug("loop candidate {}->{}: keyframes of different maps, left to map merging", query, match);
-    return std::nullopt;
+  Stopwatch watch;
+  map::LockHoldClock clock;
+  std::optional<LoopEvidence> evidence;
+  {
+    const map::MapReader view = map_.reader(&clock);
+    evidence = gather_evidence(view, query, match);
   }
-
-  // 1. Descriptor matches: query features with depth against the match keyframe's map points.
-  std::vector<int> q_rows, m_rows;
-  for (std::size_t i = 0; i < q->features.size(); ++i) {
-    if (q->features.depth[i] > 0) q_rows.push_back(static_cast<int>(i));
-  }
-  std::vector<map::PointId> m_points;
-  for (std::size_t i = 0; i < m->points.size(); ++i) {
-    const map::MapPoint* p = m->points[i] == map::kNoPoint ? nullptr : view.live_point(m->points[i]);
-    if (p == nullptr) continue;
-    m_rows.push_back(static_cast<int>(i));
-    m_points.push_back(p->id);
-  }
-  if (q_rows.size() < 20 || m_rows.size() < 20) return std::nullopt;
-  cv::Mat q_desc(static_cast<int>(q_rows.size()), 32, CV_8U),
-      m_desc(static_cast<int>(m_rows.size()), 32, CV_8U);
-  for (std::size_t r = 0; r < q_rows.size(); ++r)
-    q->features.descriptors.row(q_rows[r]).copyTo(q_desc.row(static_cast<int>(r)));
-  for (std::size_t r = 0; r < m_rows.size(); ++r)
-    m->features.descriptors.row(m_rows[r]).copyTo(m_desc.row(static_cast<int>(r)));
-  const auto matches = feat::match_ratio(q_desc, m_desc, 0.75f, track::kDescriptorThLow, true);
-  if (static_cast<int>(matches.size()) < config_.min_descriptor_matches) {
-    spdlog::debug("loop candidate {}->{}: {} descriptor matches, rejected", query, match, matches.size());
-    return std::nullopt;
-  }
-
-  // 2. 3-D/3-D RANSAC: the match side's map points (world) against the query's depth points (camera).
-  std::vector<Eigen::Vector3d> src, dst;
-  for (const auto& mt : matches) {
-    const auto qi = static_cast<std::size_t>(q_rows[static_cast<std::size_t>(mt.query)]);
-    const auto& kp = q->features.keypoints[qi];
-    dst.push_back(camera_.unproject({kp.pt.x, kp.pt.y}, q->features.depth[qi]));
-    src.push_back(view.point(m_points[static_cast<std::size_t>(mt.train)])->position);
-  }
-  geo::RansacSe3Config rc;
-  rc.inlier_threshold = config_.ransac_threshold_m;
-  rc.min_inliers = config_.min_ransac_inliers;
-  rc.seed = static_cast<std::uint32_t>(query);
-  const auto ransac = geo::estimate_se3_ransac(src, dst, rc);
-  if (!ransac) {
-    spdlog::debug("loop candidate {}->{}: RANSAC failed on {} matches", query, match, matches.size());
-    return std::nullopt;
-  }
-
-  // 3. Refine: project the loop side's local map into the query with the RANSAC pose, then optimise.
-  std::vector<map::PointId> local;
-  std::unordered_set<map::PointId> seen;
-  std::vector<map::KeyframeId> loop_side = view.best_covisibles(match, 10);
-  loop_side.push_back(match);
-  for (map::KeyframeId k : loop_side) {
-    const map::Keyframe* kf = view.keyframe(k);
-    if (kf == nullptr || kf->bad) continue;
-    for (map::PointId pid : kf->points) {
-      if (pid != map::kNoPoint && seen.insert(pid).second) local.push_back(pid);
+  if (!evidence) return std::nullopt;
+  // Off the lock from here on, except for the loop side's copy and the last view.
+  LoopVerification result = verifier_.match_and_align(*evidence);
+  if (result.accepted()) {
+    bool live = false;
+    {
+      const map::MapReader view = map_.reader(&clock);
+      live = add_loop_side(view, *evidence, config_.verify_neighbours);
     }
-  }
-  geo::SE3 T = ransac->T_dst_src;
-  const int inliers = project_and_refine(view, *q, local, T);
-  if (inliers < config_.min_projection_inliers) {
-    spdlog::debug("loop candidate {}->{}: {} inliers after refinement, rejected", query, match, inliers);
-    return std::nullopt;
-  }
-
-  // 4. A correction larger than the odometry can have drifted since the match is a look-alike place.
-  if (config_.drift.enabled) {
-    std::vector<geo::SE3> path_poses;
-    for (map::KeyframeId k : view.keyframe_ids_sorted()) {
-      if (k < match || k > query) continue;
-      const map::Keyframe* kf = view.keyframe(k);
-      if (kf != nullptr && !kf->bad) path_poses.push_back(kf->T_cw);
-    }
-    const Motion path = travelled(path_poses);
-    const Motion moved = correction(q->T_cw, T);
-    if (!plausible(moved, path, config_.drift)) {
-      const Motion allowed = allowance(path, config_.drift);
-      spdlog::info(
-          "loop candidate {}->{} rejected: it would move the keyframe {:.2f} m / {:.1f} deg, more than drift "
-          "allows after {:.1f} m / {:.0f} deg travelled ({:.2f} m / {:.1f} deg)",
-          query, match, moved.metres, moved.degrees, path.metres, path.degrees, allowed.metres,
-          allowed.degrees);
-      {
-        std::lock_guard lock(stats_mutex_);
-        ++stats_.rejected_by_drift;
-      }
-      return std::nullopt;
+    if (live) {
+      finish_evidence(*evidence);
+      verifier_.refine(*evidence, result);
+    } else {
+      result.rejection = LoopRejection::kCulled;
     }
   }
 
-  // 5. The same correction must hold for the query's neighbours: each keeps its pose relative to the
-  // query and must see the loop side's points where the corrected pose puts them.
-  if (config_.verify_neighbours > 0) {
-    const std::vector<map::KeyframeId> neighbours =
-        view.best_covisibles(query, static_cast<std::size_t>(config_.verify_neighbours));
-    int tried = 0, confirmed = 0;
-    for (map::KeyframeId n : neighbours) {
-      const map::Keyframe* nkf = view.keyframe(n);
-      if (nkf == nullptr || nkf->bad || std::find(loop_side.begin(), loop_side.end(), n) != loop_side.end())
-        continue;
-      ++tried;
-      geo::SE3 T_n = nkf->T_cw * q->T_cw.inverse() * T;
-      if (project_and_refine(view, *nkf, local, T_n) >= config_.neighbour_min_inliers) ++confirmed;
-    }
-    if (tried > 0 && 2 * confirmed < tried) {
-      {
-        std::lock_guard lock(stats_mutex_);
-        ++stats_.rejected_by_neighbours;
-      }
-      spdlog::debug("loop candidate {}->{}: confirmed by {} of {} neighbours, rejected", query, match,
-                    confirmed, tried);
-      return std::nullopt;
+  std::optional<VerifiedLoop> loop;
+  if (result.accepted() || !result.counters.empty()) {
+    map::MapView view = map_.view(&clock);
+    result.counters.apply(view);
+    // Local mapping may have culled either keyframe while the lock was free.
+    const map::Keyframe* q = view.keyframe(query);
+    const map::Keyframe* m = view.keyframe(match);
+    if (result.accepted() && q != nullptr && !q->bad && m != nullptr && !m->bad) {
+      loop.emplace(
+          VerifiedLoop{query, match, result.T_query_w, result.inliers,
+                       LoopClosure{evidence->query_stamp, evidence->match_stamp,
+                                   result.T_query_w * evidence->T_match_cw.inverse(), result.inliers},
+                       map::KeyframeHold(map_)});
+      // Held until correct() is done with them: local mapping may cull between the two views.
+      loop->hold.add(view, query);
+      loop->hold.add(view, match);
     }
   }
-  VerifiedLoop loop{query,
-                    match,
-                    T,
-                    inliers,
-                    LoopClosure{q->stamp, m->stamp, T * m->T_cw.inverse(), inliers},
-                    map::KeyframeHold(map_)};
-  // Held until correct() is done with them: local mapping may cull between the two views.
-  loop.hold.add(view, query);
-  loop.hold.add(view, match);
+  const map::LockHoldClock::Times lock = clock.take();
+  std::lock_guard stats_lock(stats_mutex_);
+  ++stats_.verifications;
+  stats_.verification_ms_total += watch.elapsed_ms();
+  stats_.verification_lock_ms_total += lock.held_ms;
+  if (result.rejection == LoopRejection::kDrift) ++stats_.rejected_by_drift;
+  if (result.rejection == LoopRejection::kNeighbours) ++stats_.rejected_by_neighbours;
   return loop;
-}
-
-int LoopCloser::project_and_refine(map::MapView& view, const map::Keyframe& kf,
-                                   const std::vector<map::PointId>& local, geo::SE3& T_cw) const {
-  track::Frame frame;
-  frame.features = kf.features;
-  frame.grid = map::make_feature_grid(frame.features.keypoints, camera_.width, camera_.height);
-  frame.reset_matches();
-  frame.T_cw = T_cw;
-  frame.has_pose = true;
-  track::match_local_points(view, frame, local, 3.0, track::MatchContext{camera_, pyramid_, depth_.bf});
-  std::vector<opt::PoseObservation> obs;
-  for (std::size_t i = 0; i < frame.points.size(); ++i) {
-    if (frame.points[i] == map::kNoPoint) continue;
-    const auto& kp = frame.features.keypoints[i];
-    obs.push_back({view.point(frame.points[i])->position,
-                   {kp.pt.x, kp.pt.y},
-                   frame.features.u_right[i],
-                   pyramid_.inv_level_sigma2[static_cast<std::size_t>(kp.octave)]});
-  }
-  if (obs.size() < 3) return 0;
-  const auto result = opt::optimize_pose(
-      T_cw, obs, opt::CameraModel{camera_.fx, camera_.fy, camera_.cx, camera_.cy, depth_.bf},
-      opt::PoseOptimizerConfig{});
-  return result.inliers;
 }
 
 bool LoopCloser::correct(VerifiedLoop loop) {

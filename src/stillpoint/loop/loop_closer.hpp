@@ -12,6 +12,7 @@
 #include "stillpoint/common/config_reader.hpp"
 #include "stillpoint/loop/drift_limit.hpp"
 #include "stillpoint/loop/loop_detector.hpp"
+#include "stillpoint/loop/loop_verifier.hpp"
 #include "stillpoint/loop/vocabulary.hpp"
 #include "stillpoint/map/keyframe_hold.hpp"
 #include "stillpoint/map/map.hpp"
@@ -58,6 +59,9 @@ struct LoopClosingStats {
   std::size_t loops_closed = 0;            // corrections applied
   std::size_t rejected_by_drift = 0;       // verified geometrically, but moved further than drift allows
   std::size_t rejected_by_neighbours = 0;  // the query's neighbours did not confirm the loop pose
+  std::size_t verifications = 0;           // candidates that reached geometric verification
+  double verification_ms_total = 0;        // geometric verification, copying the evidence included
+  double verification_lock_ms_total = 0;   // of which the map lock was held (copy in, counters out)
   std::size_t queries = 0;                 // database queries made by the detector
   double detection_ms_total = 0;           // candidate search in the database (not BoW, not verification)
   double bow_ms_total = 0;                 // BoW conversion of the keyframes
@@ -113,7 +117,9 @@ class LoopCloser {
     LoopClosure closure;  // what the benchmark checks against ground truth
     map::KeyframeHold hold;
   };
-  // Geometric verification of one candidate pair (the steps of process(), usable on their own).
+  // Geometric verification of one candidate pair (the steps of process(), usable on their own): the
+  // evidence is copied under a short view and LoopVerifier runs with the map lock free; nullopt when
+  // rejected or when local mapping culled either keyframe meanwhile.
   std::optional<VerifiedLoop> verify(map::KeyframeId query, map::KeyframeId match);
   // Corrects the map for a verified loop (fusion, pose graph, points, then a global BA if configured)
   // and releases its keyframes; false when the query was culled meanwhile (not possible while held).
@@ -121,9 +127,6 @@ class LoopCloser {
 
  private:
   void handle_candidates(const std::vector<LoopCandidate>& candidates, map::KeyframeId kid);
-  // Projects the loop side's points into a keyframe at T_cw, refines T_cw on the matches; the inliers.
-  int project_and_refine(map::MapView& view, const map::Keyframe& kf, const std::vector<map::PointId>& local,
-                         geo::SE3& T_cw) const;
   void start_global_ba(std::uint64_t changes_at_start);
   void run_global_ba(std::uint64_t changes_at_start);
 
@@ -134,6 +137,7 @@ class LoopCloser {
   track::DepthModel depth_;
   map::ScalePyramid pyramid_;
   bool deterministic_;
+  LoopVerifier verifier_;
   std::unique_ptr<LoopDetector> detector_;
   GlobalDescriber describe_;
   KeyframeFiled filed_;

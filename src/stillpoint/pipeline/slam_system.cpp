@@ -531,6 +531,9 @@ nlohmann::json SlamSystem::statistics() {
       j["loop_global_descriptor_ms_total"] = ls.global_ms_total;
       j["place_model_load_ms"] = place_model_load_ms_;
     }
+    j["loop_verifications"] = ls.verifications;
+    j["loop_verification_ms_total"] = ls.verification_ms_total;
+    j["loop_verification_lock_ms_total"] = ls.verification_lock_ms_total;
     j["loop_correction_ms_total"] = ls.correction_ms_total;
     j["global_ba_runs"] = ls.global_ba_runs;
     j["vocabulary_words"] = vocabulary_words_;

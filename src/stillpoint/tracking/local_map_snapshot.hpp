@@ -89,6 +89,7 @@ class PointCounterUpdates {
   void found(map::PointId id) { found_.push_back(id); }
   void apply(map::MapView& view);
   void clear();
+  [[nodiscard]] bool empty() const { return visible_.empty() && found_.empty(); }
 
  private:
   std::vector<map::PointId> visible_, found_;
