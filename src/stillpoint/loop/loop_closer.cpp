@@ -72,10 +72,7 @@ LoopCloser::LoopCloser(map::Map& map, LoopClosingConfig config, std::shared_ptr<
       depth_(depth),
       pyramid_(std::move(pyramid)),
       deterministic_(deterministic),
-      verifier_(LoopVerifierConfig{config_.min_descriptor_matches, config_.ransac_threshold_m,
-                                   config_.min_ransac_inliers, config_.min_projection_inliers,
-                                   config_.verify_neighbours, config_.neighbour_min_inliers, config_.drift},
-                camera_, depth_, pyramid_) {
+      verifier_(config_.verification(), camera_, depth_, pyramid_) {
   if (config_.detector != "off" && vocabulary_ != nullptr) {
     detector_ = make_loop_detector(config_.detector, config_.detection);
   }

@@ -43,6 +43,16 @@ struct LoopClosingConfig {
   bool global_ba = true;  // run a global BA after each closed loop (background thread)
   int global_ba_iterations = 10;
   static LoopClosingConfig from_yaml(const ConfigReader& r);
+  // The verification thresholds, as LoopVerifier takes them.
+  [[nodiscard]] LoopVerifierConfig verification() const {
+    return {min_descriptor_matches,
+            ransac_threshold_m,
+            min_ransac_inliers,
+            min_projection_inliers,
+            verify_neighbours,
+            neighbour_min_inliers,
+            drift};
+  }
 };
 
 // One closed loop, as the benchmark checks it against ground truth.

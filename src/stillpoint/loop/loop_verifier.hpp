@@ -1,9 +1,9 @@
 #pragma once
 // RGB-D geometric verification of one loop candidate, off the map lock: what it reads from the map is
-// copied first (LoopEvidence, under one short MapReader), then descriptor matches -> 3-D/3-D RANSAC
-// SE(3) -> projection matches with pose refinement -> drift limit -> the query's neighbours re-check the
-// pose, all on the copy. Tracking and local mapping go on meanwhile; the caller re-checks under its next
-// view that the two keyframes are still alive before it trusts the result (LoopCloser::verify).
+// copied first (LoopEvidence, under two short MapReaders, see gather_evidence), then descriptor matches ->
+// 3-D/3-D RANSAC SE(3) -> projection matches with pose refinement -> drift limit -> the query's neighbours
+// re-check the pose, all on the copy. Tracking and local mapping go on meanwhile; the caller re-checks under
+// its next view that the two keyframes are still alive before it trusts the result (LoopCloser::verify).
 #include <optional>
 #include <vector>
 
