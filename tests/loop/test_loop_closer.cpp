@@ -187,16 +187,13 @@ TEST_F(LoopCloserTest, AWrongPlaceIsNotVerified) {
 // map lock, and the map changing afterwards does not change its answer.
 TEST_F(LoopCloserTest, VerificationRunsOnItsCopyWhileTheMapIsLocked) {
   LoopClosingConfig c;
-  const LoopVerifier verifier(
-      LoopVerifierConfig{c.min_descriptor_matches, c.ransac_threshold_m, c.min_ransac_inliers,
-                         c.min_projection_inliers, c.verify_neighbours, c.neighbour_min_inliers, c.drift},
-      cam_, depth_, pyramid_);
+  const LoopVerifier verifier(c.verification, cam_, depth_, pyramid_);
   std::optional<LoopEvidence> evidence;
   {
     const map::MapReader view = map_.reader();
     evidence = gather_evidence(view, ids_.back(), ids_[1]);
     ASSERT_TRUE(evidence.has_value());
-    ASSERT_TRUE(add_loop_side(view, *evidence, c.verify_neighbours));
+    ASSERT_TRUE(add_loop_side(view, *evidence, c.verification.verify_neighbours));
   }
   finish_evidence(*evidence);
   EXPECT_FALSE(evidence->neighbours.empty());  // the neighbour check has views to run on

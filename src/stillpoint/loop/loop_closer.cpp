@@ -29,16 +29,16 @@ LoopClosingConfig LoopClosingConfig::from_yaml(const ConfigReader& r) {
     r.read_choice("sequence_trigger", c.detection.sequence.trigger, {"rising-edge", "level"});
   }
   r.read("min_keyframes", c.min_keyframes, std::size_t{2}, std::size_t{10000});
-  r.read("min_descriptor_matches", c.min_descriptor_matches, 3, 10000);
-  r.read("ransac_threshold_m", c.ransac_threshold_m, 0.001, 1.0);
-  r.read("min_ransac_inliers", c.min_ransac_inliers, 3, 10000);
-  r.read("min_projection_inliers", c.min_projection_inliers, 3, 10000);
-  r.read("verify_neighbours", c.verify_neighbours, 0, 50);
-  r.read("neighbour_min_inliers", c.neighbour_min_inliers, 3, 10000);
-  r.read("drift_check", c.drift.enabled);
-  r.read("max_correction_m", c.drift.base_m, 0.0, 1000.0);
-  r.read("max_correction_deg", c.drift.base_deg, 0.0, 180.0);
-  r.read("max_correction_ratio", c.drift.ratio, 0.0, 10.0);
+  r.read("min_descriptor_matches", c.verification.min_descriptor_matches, 3, 10000);
+  r.read("ransac_threshold_m", c.verification.ransac_threshold_m, 0.001, 1.0);
+  r.read("min_ransac_inliers", c.verification.min_ransac_inliers, 3, 10000);
+  r.read("min_projection_inliers", c.verification.min_projection_inliers, 3, 10000);
+  r.read("verify_neighbours", c.verification.verify_neighbours, 0, 50);
+  r.read("neighbour_min_inliers", c.verification.neighbour_min_inliers, 3, 10000);
+  r.read("drift_check", c.verification.drift.enabled);
+  r.read("max_correction_m", c.verification.drift.base_m, 0.0, 1000.0);
+  r.read("max_correction_deg", c.verification.drift.base_deg, 0.0, 180.0);
+  r.read("max_correction_ratio", c.verification.drift.ratio, 0.0, 10.0);
   r.read("global_ba", c.global_ba);
   r.read("global_ba_iterations", c.global_ba_iterations, 1, 1000);
   return c;
@@ -72,7 +72,7 @@ LoopCloser::LoopCloser(map::Map& map, LoopClosingConfig config, std::shared_ptr<
       depth_(depth),
       pyramid_(std::move(pyramid)),
       deterministic_(deterministic),
-      verifier_(config_.verification(), camera_, depth_, pyramid_) {
+      verifier_(config_.verification, camera_, depth_, pyramid_) {
   if (config_.detector != "off" && vocabulary_ != nullptr) {
     detector_ = make_loop_detector(config_.detector, config_.detection);
   }
@@ -216,7 +216,7 @@ std::optional<LoopCloser::VerifiedLoop> LoopCloser::verify(map::KeyframeId query
     bool live = false;
     {
       const map::MapReader view = map_.reader(&clock);
-      live = add_loop_side(view, *evidence, config_.verify_neighbours);
+      live = add_loop_side(view, *evidence, config_.verification.verify_neighbours);
     }
     if (live) {
       finish_evidence(*evidence);

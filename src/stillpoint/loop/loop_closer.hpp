@@ -27,32 +27,11 @@ struct LoopClosingConfig {
   std::string place_model = "models/parc_netvlad/parc_netvlad_small.pt";
   std::string vocabulary = "data/vocab/stillpoint_orb.spv";  // relative paths: from the project root
   LoopDetectorParams detection;
-  std::size_t min_keyframes = 10;    // no detection before the map has this many keyframes
-  int min_descriptor_matches = 20;   // BoW-candidate keyframes sharing fewer matches are dropped
-  double ransac_threshold_m = 0.05;  // 3-D/3-D RANSAC inlier distance
-  int min_ransac_inliers = 20;
-  int min_projection_inliers = 40;  // inliers after refinement with projection matches
-  // The loop pose must also hold for the query's best covisible keyframes (moved with it): of the first
-  // verify_neighbours (0: no check), at least half must reach neighbour_min_inliers. A place that only
-  // looks alike from one view (a symmetric room, a repeated poster) fails from the next ones.
-  int verify_neighbours = 4;
-  int neighbour_min_inliers = 30;
-  // A loop whose correction is larger than odometry can have drifted since the matched keyframe is a
-  // look-alike place (drift_limit.hpp).
-  DriftLimitConfig drift;
-  bool global_ba = true;  // run a global BA after each closed loop (background thread)
+  std::size_t min_keyframes = 10;   // no detection before the map has this many keyframes
+  LoopVerifierConfig verification;  // geometric verification of a candidate (same YAML section)
+  bool global_ba = true;            // run a global BA after each closed loop (background thread)
   int global_ba_iterations = 10;
   static LoopClosingConfig from_yaml(const ConfigReader& r);
-  // The verification thresholds, as LoopVerifier takes them.
-  [[nodiscard]] LoopVerifierConfig verification() const {
-    return {min_descriptor_matches,
-            ransac_threshold_m,
-            min_ransac_inliers,
-            min_projection_inliers,
-            verify_neighbours,
-            neighbour_min_inliers,
-            drift};
-  }
 };
 
 // One closed loop, as the benchmark checks it against ground truth.

@@ -16,16 +16,22 @@
 namespace sp::loop {
 
 struct LoopVerifierConfig {
-  int min_descriptor_matches = 20;
-  double ransac_threshold_m = 0.05;
+  int min_descriptor_matches = 20;   // BoW-candidate keyframes sharing fewer matches are dropped
+  double ransac_threshold_m = 0.05;  // 3-D/3-D RANSAC inlier distance
   int min_ransac_inliers = 20;
-  int min_projection_inliers = 40;
+  int min_projection_inliers = 40;  // inliers after refinement with projection matches
+  // The loop pose must also hold for the query's best covisible keyframes (moved with it): of the first
+  // verify_neighbours (0: no check), at least half must reach neighbour_min_inliers. A place that only
+  // looks alike from one view (a symmetric room, a repeated poster) fails from the next ones.
   int verify_neighbours = 4;
   int neighbour_min_inliers = 30;
+  // A loop whose correction is larger than odometry can have drifted since the matched keyframe is a
+  // look-alike place (drift_limit.hpp).
   DriftLimitConfig drift;
 };
 
-// Everything verification reads, copied under one view. Features are deep copies.
+// Everything verification reads, copied under two short views (gather_evidence, add_loop_side).
+// Features are deep copies.
 struct LoopEvidence {
   struct View {
     map::KeyframeId id = map::kNoKeyframe;
