@@ -13,6 +13,7 @@
 #include "../support/synthetic_map.hpp"
 #include "stillpoint/loop/loop_closer.hpp"
 #include "stillpoint/loop/loop_verifier.hpp"
+#include "stillpoint/loop/pose_graph_correction.hpp"
 #include "stillpoint/tracking/pose_guard.hpp"
 
 namespace sp::loop {
@@ -229,6 +230,87 @@ TEST_F(LoopCloserTest, AKeyframeCulledBetweenTheCopiesEndsTheVerification) {
   const map::MapReader view = map_.reader();
   EXPECT_FALSE(add_loop_side(view, *evidence, 4));
   EXPECT_FALSE(gather_evidence(view, ids_.back(), ids_[1]).has_value());
+}
+
+// The pose graph is solved on a copy while tracking and local mapping go on; the solution must then land
+// on the map as it has become: a keyframe local BA moved keeps that motion on top of its correction, a
+// keyframe made meanwhile follows its parent, points follow the keyframe that corrected them.
+TEST_F(LoopCloserTest, ThePoseGraphSolvedOffTheLockLandsOnTheMapAsItBecame) {
+  std::unordered_map<map::KeyframeId, geo::SE3> old_pose;
+  EssentialGraph graph;
+  {
+    const map::MapReader view = map_.reader();
+    for (map::KeyframeId k : view.keyframe_ids_sorted()) old_pose[k] = view.keyframe(k)->T_cw;
+    graph = essential_graph(view, ids_.back(), ids_[1], old_pose, {});
+  }
+  ASSERT_EQ(graph.vertices.size(), ids_.size());
+  EXPECT_GE(graph.edges.size(), ids_.size() - 1);  // at least the spanning tree
+  // A "solution": every free keyframe moved by its own small twist.
+  std::unordered_map<map::KeyframeId, geo::SE3> solved_from;
+  std::mt19937 rng(3);
+  std::normal_distribution<double> n(0.0, 0.01);
+  for (auto& v : graph.vertices) {
+    solved_from[v.id] = v.T_cw;
+    if (v.fixed) continue;
+    geo::Vec6 xi;
+    for (int i = 0; i < 6; ++i) xi[i] = n(rng);
+    v.T_cw = geo::SE3::exp(xi) * v.T_cw;
+  }
+  auto solved = [&](map::KeyframeId k) {
+    for (const auto& v : graph.vertices)
+      if (v.id == k) return v.T_cw;
+    throw std::logic_error("no vertex");
+  };
+  const map::KeyframeId moved = ids_[20], parent = ids_[30], untouched = ids_[10];
+  geo::Vec6 local_ba;
+  local_ba << 0.002, -0.001, 0.003, 0.001, 0.0, -0.002;
+  const geo::SE3 moved_to = geo::SE3::exp(local_ba) * old_pose.at(moved);
+  map::KeyframeId added = map::kNoKeyframe;
+  map::PointId reference_point = map::kNoPoint, overridden_point = map::kNoPoint;
+  Eigen::Vector3d reference_point_was, overridden_point_was;
+  std::unordered_map<map::PointId, map::KeyframeId> corrected_by;
+  {
+    map::MapView view = map_.view();  // meanwhile: local BA moves a keyframe, tracking adds one
+    view.keyframe(moved)->T_cw = moved_to;
+    map::Keyframe kf;
+    kf.T_cw = geo::SE3::exp(local_ba) * old_pose.at(parent);
+    added = view.add_keyframe(std::move(kf));
+    view.keyframe(added)->parent = parent;
+    for (const auto& [pid, p] : view.points()) {
+      if (p.bad) continue;
+      if (reference_point == map::kNoPoint && p.reference == ids_[5]) {
+        reference_point = pid;
+        reference_point_was = p.position;
+      } else if (overridden_point == map::kNoPoint && p.reference == ids_[6]) {
+        overridden_point = pid;
+        overridden_point_was = p.position;
+      }
+    }
+  }
+  ASSERT_NE(reference_point, map::kNoPoint);
+  ASSERT_NE(overridden_point, map::kNoPoint);
+  corrected_by[overridden_point] = ids_[40];
+  geo::SE3 added_was;
+  {
+    map::MapView view = map_.view();
+    added_was = view.keyframe(added)->T_cw;
+    apply_pose_graph(view, graph, solved_from, corrected_by, pyramid_);
+  }
+  const map::MapReader view = map_.reader();
+  EXPECT_EQ(view.keyframe(untouched)->T_cw.matrix(), solved(untouched).matrix());
+  const geo::SE3 moved_expected = moved_to * old_pose.at(moved).inverse() * solved(moved);
+  EXPECT_LT((view.keyframe(moved)->T_cw.matrix() - moved_expected.matrix()).norm(), 1e-12);
+  EXPECT_GT((view.keyframe(moved)->T_cw.matrix() - solved(moved).matrix()).norm(), 1e-3);
+  const geo::SE3 added_expected = added_was * old_pose.at(parent).inverse() * solved(parent);
+  EXPECT_LT((view.keyframe(added)->T_cw.matrix() - added_expected.matrix()).norm(), 1e-12);
+  auto moved_with = [&](map::KeyframeId k, const Eigen::Vector3d& p) {
+    return Eigen::Vector3d(solved(k).inverse() * (old_pose.at(k) * p));
+  };
+  EXPECT_LT((view.point(reference_point)->position - moved_with(ids_[5], reference_point_was)).norm(), 1e-12);
+  EXPECT_LT((view.point(overridden_point)->position - moved_with(ids_[40], overridden_point_was)).norm(),
+            1e-12);
+  EXPECT_GT((view.point(overridden_point)->position - moved_with(ids_[6], overridden_point_was)).norm(),
+            1e-4);
 }
 
 TEST_F(LoopCloserTest, DetectsTheLoopFromTheKeyframeStreamAndClosesIt) {

@@ -16,14 +16,17 @@ struct Scene {
 };
 
 // `keyframes` cameras, `points` points; every point seen by every camera it projects into.
-Scene make_scene(int keyframes, int points, double pixel_noise, double outlier_ratio, unsigned seed) {
+// `pose_step` scales the motion between consecutive cameras (1: test::camera_pose).
+Scene make_scene(int keyframes, int points, double pixel_noise, double outlier_ratio, unsigned seed,
+                 double pose_step = 1.0) {
   std::mt19937 rng(seed);
   const CameraModel cam = test::test_camera();
   std::normal_distribution<double> n01(0.0, 1.0);
   std::uniform_real_distribution<double> u01(0.0, 1.0);
   Scene s;
   for (int k = 0; k < keyframes; ++k)
-    s.truth.keyframes.push_back({static_cast<std::uint64_t>(100 + k), test::camera_pose(k), k == 0});
+    s.truth.keyframes.push_back({static_cast<std::uint64_t>(100 + k),
+                                 geo::SE3::exp(pose_step * k * test::camera_pose(1).log()), k == 0});
   const auto pts = test::random_points(rng, points);
   for (int i = 0; i < points; ++i) s.truth.points.push_back({static_cast<std::uint64_t>(7 * i + 1), pts[i]});
   for (const BAKeyframe& kf : s.truth.keyframes) {
@@ -158,13 +161,47 @@ TEST(BundleAdjustment, RejectsUnknownIds) {
   EXPECT_THROW(run_bundle_adjustment(d.problem, test::test_camera(), BAConfig{}), Error);
 }
 
+TEST(BundleAdjustment, SparseSchurGivesTheSameSolutionWithEigenAndSuiteSparse) {
+  // 48 free keyframes above the dense limit: Ceres factorises the reduced camera system sparsely.
+  Scene eigen = make_scene(49, 400, 0.5, 0.0, 8, 0.05);
+  Scene suite = eigen;
+  BAConfig config;
+  config.solver = "ceres";
+  config.dense_schur_max_keyframes = 10;
+  config.sparse_library = "eigen";
+  const BAResult a = run_bundle_adjustment(eigen.problem, test::test_camera(), config);
+  config.sparse_library = "suite_sparse";
+  const BAResult b = run_bundle_adjustment(suite.problem, test::test_camera(), config);
+  EXPECT_LT(max_pose_error(eigen.problem, eigen.truth), 0.01);
+  EXPECT_LT(max_pose_error(eigen.problem, suite.problem), 1e-6);
+  EXPECT_NEAR(a.final_cost, b.final_cost, 1e-6 * b.final_cost);
+  EXPECT_EQ(a.outlier, b.outlier);
+}
+
+TEST(BundleAdjustment, DenseAndSparseSchurGiveTheSameSolution) {
+  Scene dense = make_scene(49, 400, 0.5, 0.0, 8, 0.05);
+  Scene sparse = dense;
+  BAConfig config;
+  config.solver = "ceres";
+  const BAResult a = run_bundle_adjustment(dense.problem, test::test_camera(), config);
+  config.dense_schur_max_keyframes = 10;
+  const BAResult b = run_bundle_adjustment(sparse.problem, test::test_camera(), config);
+  EXPECT_LT(max_pose_error(dense.problem, sparse.problem), 1e-6);
+  EXPECT_NEAR(a.final_cost, b.final_cost, 1e-6 * b.final_cost);
+  EXPECT_EQ(a.outlier, b.outlier);
+}
+
 TEST(BundleAdjustment, ConfigFromYaml) {
   const BAConfig c =
       BAConfig::from_yaml(ConfigReader::from_string("iterations_first: 7\nthreads: 2\n", "t.yaml"));
   EXPECT_EQ(c.iterations_first, 7);
   EXPECT_EQ(c.threads, 2);
   EXPECT_EQ(c.iterations_second, 10);
+  EXPECT_EQ(c.sparse_library, "suite_sparse");
+  EXPECT_EQ(c.dense_schur_max_keyframes, 300);
   EXPECT_THROW(BAConfig::from_yaml(ConfigReader::from_string("chi2_mono: -1\n", "t.yaml")), ConfigError);
+  EXPECT_THROW(BAConfig::from_yaml(ConfigReader::from_string("sparse_library: cxsparse\n", "t.yaml")),
+               ConfigError);
 }
 
 }  // namespace

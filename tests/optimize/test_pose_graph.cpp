@@ -78,6 +78,26 @@ TEST(PoseGraph, NoisyEdgesReduceDrift) {
   EXPECT_LT(max_error(l), 0.1 * before);
 }
 
+TEST(PoseGraph, EigenAndSuiteSparseGiveTheSameSolution) {
+  Loop eigen = make_loop(300, 0.002, 4);
+  // Extra loop edges across the circle make the normal equations less banded.
+  for (int k = 0; k < 150; k += 10) {
+    const int j = k + 150;
+    eigen.edges.push_back({static_cast<std::uint64_t>(k), static_cast<std::uint64_t>(j),
+                           eigen.truth[k] * eigen.truth[j].inverse(), 5.0});
+  }
+  Loop suite = eigen;
+  const double before = max_error(eigen);
+  PoseGraphConfig config;
+  const PoseGraphResult a = optimize_pose_graph(eigen.vertices, eigen.edges, config);
+  config.sparse_library = "suite_sparse";
+  const PoseGraphResult b = optimize_pose_graph(suite.vertices, suite.edges, config);
+  EXPECT_LT(max_error(eigen), 0.1 * before);
+  EXPECT_NEAR(a.final_cost, b.final_cost, 1e-9 + 1e-6 * b.final_cost);
+  for (std::size_t k = 0; k < eigen.vertices.size(); ++k)
+    EXPECT_LT(test::position_error(eigen.vertices[k].T_cw, suite.vertices[k].T_cw), 1e-6) << k;
+}
+
 TEST(PoseGraph, RejectsBadInput) {
   Loop l = make_loop(5, 0.0, 3);
   std::vector<PoseGraphEdge> edges = l.edges;

@@ -11,6 +11,7 @@
 
 #include "stillpoint/common/error.hpp"
 #include "stillpoint/common/timing.hpp"
+#include "stillpoint/loop/pose_graph_correction.hpp"
 #include "stillpoint/optimize/pose_graph.hpp"
 #include "stillpoint/tracking/projection_matcher.hpp"
 
@@ -260,9 +261,14 @@ bool LoopCloser::correct(VerifiedLoop loop) {
   abort_global_ba_ = true;  // a newer loop makes a running global BA obsolete
   finish();
   abort_global_ba_ = false;
-  std::uint64_t changes = 0;
+  map::LockHoldClock clock;
+  std::unordered_map<map::KeyframeId, geo::SE3> old_pose;  // before the correction
+  std::unordered_map<map::PointId, map::KeyframeId> corrected_by;
+  std::set<std::pair<map::KeyframeId, map::KeyframeId>> loop_links;
+  EssentialGraph graph;
+  std::uint64_t changes_after_move = 0;
   {
-    map::MapView view = map_.view();
+    map::MapView view = map_.view(&clock);
     map::Keyframe* q = view.keyframe(query);
     const map::Keyframe* m = view.keyframe(match);
     if (q == nullptr || q->bad || m == nullptr || m->bad) {
@@ -270,7 +276,6 @@ bool LoopCloser::correct(VerifiedLoop loop) {
       return false;
     }
     // Poses before the correction: every old edge of the essential graph keeps its relative pose.
-    std::unordered_map<map::KeyframeId, geo::SE3> old_pose;
     for (map::KeyframeId k : view.keyframe_ids_sorted()) old_pose[k] = view.keyframe(k)->T_cw;
 
     // 1. Move the query's covisible group rigidly onto the loop side, with its points.
@@ -282,7 +287,6 @@ bool LoopCloser::correct(VerifiedLoop loop) {
     // Each point is corrected once per loop, by the first group keyframe that sees it (ORB-SLAM's
     // mnCorrectedByKF); step 4 moves it on with that keyframe, not with its reference keyframe, which
     // may lie outside the group and would move it a second time.
-    std::unordered_map<map::PointId, map::KeyframeId> corrected_by;
     for (map::KeyframeId k : group) {
       map::Keyframe* kf = view.keyframe(k);
       const geo::SE3 delta = corrected[k].inverse() * kf->T_cw;  // old world -> corrected world
@@ -314,7 +318,6 @@ bool LoopCloser::correct(VerifiedLoop loop) {
     // Links the fusion made between the group and the rest of the map (ORB-SLAM's LoopConnections):
     // they are the loop, so the pose graph measures them with the corrected poses. With the poses from
     // before the correction they would hold the drift the loop is closing (before 2026-12-02 they did).
-    std::set<std::pair<map::KeyframeId, map::KeyframeId>> loop_links;
     for (map::KeyframeId k : group) {
       for (const auto& [other, w] : view.keyframe(k)->covisibility) {
         if (links_before[k].contains(other) || std::find(group.begin(), group.end(), other) != group.end())
@@ -322,64 +325,44 @@ bool LoopCloser::correct(VerifiedLoop loop) {
         loop_links.insert(std::minmax(k, other));
       }
     }
+    // 3a. The essential graph is copied; the map is consistent again (the group sits on the loop side,
+    // the rest waits for the pose graph), so tracking and local mapping go on while it is solved.
+    graph = essential_graph(view, query, match, old_pose, loop_links);
+    map_.notify_big_change();  // frames and local BAs that read the map before the move are dropped
+    changes_after_move = map_.big_change_count();
+  }
 
-    // 3. Pose graph over the essential graph: spanning tree, strong covisibility, loop edges.
-    std::vector<opt::PoseGraphVertex> vertices;
-    std::vector<opt::PoseGraphEdge> edges;
-    const std::vector<map::KeyframeId> ids = view.keyframe_ids_sorted();
-    auto relative_old = [&](map::KeyframeId i, map::KeyframeId j) {
-      return old_pose[i] * old_pose[j].inverse();
-    };
-    for (map::KeyframeId k : ids) {
-      const map::Keyframe* kf = view.keyframe(k);
-      // Keyframes of other maps (not merged yet) share no edge with the loop's map: held as they are.
-      vertices.push_back({k, kf->T_cw, k == ids.front() || k == match || kf->map_id != m->map_id});
-      if (kf->parent != map::kNoKeyframe && old_pose.contains(kf->parent) &&
-          !view.keyframe(kf->parent)->bad) {
-        edges.push_back({k, kf->parent, relative_old(k, kf->parent), 1.0});
-      }
-      for (const auto& [other, w] : kf->covisibility) {
-        if (other < k && w >= 100 && other != kf->parent && old_pose.contains(other)) {
-          edges.push_back({k, other,
-                           loop_links.contains({other, k}) ? kf->T_cw * view.keyframe(other)->T_cw.inverse()
-                                                           : relative_old(k, other),
-                           1.0});
-        }
-      }
-      for (map::KeyframeId other : kf->loop_edges) {
-        if (other >= k || !old_pose.contains(other)) continue;
-        const bool new_edge = (k == query && other == match) || (k == match && other == query);
-        // The new loop edge is measured with the corrected pose; old loop edges keep their geometry.
-        edges.push_back({k, other,
-                         new_edge ? view.keyframe(k)->T_cw * view.keyframe(other)->T_cw.inverse()
-                                  : relative_old(k, other),
-                         1.0});
-      }
-    }
-    const std::unordered_map<map::KeyframeId, geo::SE3> before_graph = [&] {
-      std::unordered_map<map::KeyframeId, geo::SE3> m;
-      for (const auto& v : vertices) m[v.id] = v.T_cw;
-      return m;
-    }();
-    opt::optimize_pose_graph(vertices, edges, opt::PoseGraphConfig{});
-    for (const auto& v : vertices) view.keyframe(v.id)->T_cw = v.T_cw;
+  // 3b. The pose graph, off the lock.
+  Stopwatch solve_watch;
+  std::unordered_map<map::KeyframeId, geo::SE3> before_graph;
+  for (const auto& v : graph.vertices) before_graph[v.id] = v.T_cw;
+  opt::optimize_pose_graph(graph.vertices, graph.edges, opt::PoseGraphConfig{});
+  double solve_ms = solve_watch.elapsed_ms();
 
-    // 4. Points follow the keyframe that corrected them in step 1, else their reference keyframe.
-    for (const auto& [pid, p] : view.points()) {
-      if (p.bad) continue;
-      const auto by = corrected_by.find(pid);
-      const map::KeyframeId anchor = by != corrected_by.end() ? by->second : p.reference;
-      const map::Keyframe* ref = view.keyframe(anchor);
-      if (ref == nullptr || !before_graph.contains(anchor)) continue;
-      map::MapPoint* mp = view.point(pid);
-      mp->position = ref->T_cw.inverse() * (before_graph.at(anchor) * mp->position);
+  std::uint64_t changes = 0;
+  {
+    map::MapView view = map_.view(&clock);
+    if (map_.big_change_count() != changes_after_move) {
+      // Another correction (a map merge by the tracker) moved keyframes meanwhile: the solution
+      // no longer fits the map, so the graph is solved again from the map as it is, under the lock.
+      Stopwatch again;
+      graph = essential_graph(view, query, match, old_pose, loop_links);
+      before_graph.clear();
+      for (const auto& v : graph.vertices) before_graph[v.id] = v.T_cw;
+      opt::optimize_pose_graph(graph.vertices, graph.edges, opt::PoseGraphConfig{});
+      solve_ms += again.elapsed_ms();
     }
-    for (const auto& [pid, p] : view.points()) {
-      if (!p.bad) view.update_point_normal_and_depth(pid, pyramid_);
-    }
+    // 3c. Keyframes and points take their corrections.
+    apply_pose_graph(view, graph, before_graph, corrected_by, pyramid_);
     map_.notify_big_change();
     changes = map_.big_change_count();
     loop.hold.release(view);
+  }
+  const map::LockHoldClock::Times lock = clock.take();
+  {
+    std::lock_guard stats_lock(stats_mutex_);
+    stats_.pose_graph_ms_total += solve_ms;
+    stats_.correction_lock_ms_total += lock.held_ms;
   }
   if (config_.global_ba) start_global_ba(changes);
   return true;

@@ -55,7 +55,9 @@ struct LoopClosingStats {
   double detection_ms_total = 0;           // candidate search in the database (not BoW, not verification)
   double bow_ms_total = 0;                 // BoW conversion of the keyframes
   double global_ms_total = 0;              // global (ParC_NetVLAD) descriptors of the keyframes
-  double correction_ms_total = 0;
+  double correction_ms_total = 0;          // loop corrections: move, fusion, pose graph, points
+  double correction_lock_ms_total = 0;     // of which the map lock was held (the pose graph is solved off it)
+  double pose_graph_ms_total = 0;          // pose-graph solves
   std::size_t global_ba_runs = 0;
   std::size_t global_ba_aborted = 0;
   std::vector<LoopClosure> closures;

@@ -1,6 +1,14 @@
 #include "stillpoint/optimize/ceres_terms.hpp"
 
+#include "stillpoint/common/error.hpp"
+
 namespace sp::opt {
+
+ceres::SparseLinearAlgebraLibraryType sparse_library_type(const std::string& name) {
+  if (name == "eigen") return ceres::EIGEN_SPARSE;
+  if (name == "suite_sparse") return ceres::SUITE_SPARSE;
+  throw Error("unknown sparse library '" + name + "' (eigen | suite_sparse)");
+}
 
 bool SE3Manifold::Plus(const double* x, const double* delta, double* x_plus_delta) const {
   const Eigen::Map<const geo::Vec6> d(delta);

@@ -11,6 +11,7 @@
 
 #include <array>
 #include <atomic>
+#include <string>
 
 #include "stillpoint/geometry/lie.hpp"
 #include "stillpoint/optimize/residuals.hpp"
@@ -28,6 +29,10 @@ inline PoseParams to_params(const geo::SE3& T) {
 inline geo::SE3 from_params(const double* p) {
   return geo::SE3(Eigen::Quaterniond(p[3], p[0], p[1], p[2]), Eigen::Vector3d(p[4], p[5], p[6]));
 }
+
+// "eigen" | "suite_sparse" (validated by the configs) to Ceres' sparse library enum; throws sp::Error
+// for any other name.
+ceres::SparseLinearAlgebraLibraryType sparse_library_type(const std::string& name);
 
 class SE3Manifold final : public ceres::Manifold {
  public:

@@ -14,6 +14,7 @@ PoseGraphConfig PoseGraphConfig::from_yaml(const ConfigReader& r) {
   PoseGraphConfig c;
   r.read("iterations", c.iterations, 1, 1000);
   r.read("threads", c.threads, 1, 64);
+  r.read_choice("sparse_library", c.sparse_library, {"eigen", "suite_sparse"});
   return c;
 }
 
@@ -58,6 +59,7 @@ PoseGraphResult optimize_pose_graph(std::vector<PoseGraphVertex>& vertices,
 
   ceres::Solver::Options options;
   options.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
+  options.sparse_linear_algebra_library_type = sparse_library_type(config.sparse_library);
   options.trust_region_strategy_type = ceres::LEVENBERG_MARQUARDT;
   options.max_num_iterations = config.iterations;
   options.num_threads = config.threads;

@@ -3,6 +3,7 @@
 // T_cw poses updated on the left (T <- exp(delta) T); an edge measures T_ij = T_iw * T_jw^-1 and
 // contributes weight * |log(T_ij^-1 * T_iw * T_jw^-1)|^2 / 2 to the cost. Deterministic with threads = 1.
 #include <cstdint>
+#include <string>
 #include <vector>
 
 #include "stillpoint/common/config_reader.hpp"
@@ -25,6 +26,10 @@ struct PoseGraphEdge {
 struct PoseGraphConfig {
   int iterations = 20;  // LM iterations, [1, 1000]
   int threads = 1;      // Ceres threads, [1, 64]; 1 is deterministic
+  // Sparse Cholesky behind SPARSE_NORMAL_CHOLESKY: "eigen" (default; single-threaded, no OpenMP, so
+  // ThreadSanitizer sees all of it) | "suite_sparse" (CHOLMOD; Debian's build runs OpenMP workers that
+  // TSan cannot follow, see docs/map_lock.md).
+  std::string sparse_library = "eigen";
   static PoseGraphConfig from_yaml(const ConfigReader& r);
 };
 

@@ -535,6 +535,8 @@ nlohmann::json SlamSystem::statistics() {
     j["loop_verification_ms_total"] = ls.verification_ms_total;
     j["loop_verification_lock_ms_total"] = ls.verification_lock_ms_total;
     j["loop_correction_ms_total"] = ls.correction_ms_total;
+    j["loop_correction_lock_ms_total"] = ls.correction_lock_ms_total;
+    j["loop_pose_graph_ms_total"] = ls.pose_graph_ms_total;
     j["global_ba_runs"] = ls.global_ba_runs;
     j["vocabulary_words"] = vocabulary_words_;
     j["vocabulary_load_ms"] = vocabulary_load_ms_;
