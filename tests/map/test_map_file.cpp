@@ -215,6 +215,35 @@ TEST(MapFile, RoundTripKeepsEveryField) {
   }
 }
 
+TEST(MapFile, KeyframesKeepTheirMapIds) {
+  Map map;
+  build_map(map);
+  std::mt19937 rng(11);
+  KeyframeId root = kNoKeyframe, child = kNoKeyframe;
+  {
+    // A second map, not merged: its own root and a child, no edge to map 0.
+    MapView v = map.view();
+    Keyframe a = make_keyframe(rng, 200, 40, pose(1.0, {3.0, 0.0, 0.0}), false);
+    a.map_id = MapId{1};
+    root = v.add_keyframe(std::move(a));
+    Keyframe b = make_keyframe(rng, 210, 40, pose(1.1, {3.1, 0.0, 0.0}), false);
+    b.map_id = MapId{1};
+    child = v.add_keyframe(std::move(b));
+    v.keyframe(child)->parent = root;
+    v.keyframe(root)->children.insert(child);
+  }
+  const auto file = scratch("two_maps.spmap");
+  save_map(map, file, test_info());
+  Map loaded;
+  load_map(file, loaded);
+  MapReader a = map.reader(), b = loaded.reader();
+  EXPECT_EQ(b.live_maps().size(), 2u);
+  for (KeyframeId id : a.keyframe_ids_sorted())
+    EXPECT_EQ(b.keyframe(id)->map_id, a.keyframe(id)->map_id) << id;
+  EXPECT_EQ(b.keyframe(child)->parent, root);
+  EXPECT_EQ(b.map_root(MapId{1}), root);
+}
+
 TEST(MapFile, LoadedMapGrowsWithFreshIds) {
   Map map;
   build_map(map);
@@ -366,6 +395,12 @@ TEST(MapFile, DanglingIdsAreRejected) {
   }
   {
     MapContents m = crafted();
+    ASSERT_NE(m.keyframes[2].parent, kNoKeyframe);
+    m.keyframes[2].map_id = MapId{1};  // its parent stays in map 0
+    EXPECT_NE(parse_error(serialize_map(m)).find("in map 0"), std::string::npos);
+  }
+  {
+    MapContents m = crafted();
     m.points[0].observations[4] = 0;
     EXPECT_NE(parse_error(serialize_map(m)).find("observed by missing keyframe 4"), std::string::npos);
   }
@@ -376,6 +411,23 @@ TEST(MapFile, DanglingIdsAreRejected) {
   }
 }
 
+// The fuzzer's seeds must stay valid files of this build's format (a version bump regenerates them),
+// or the fuzzer only ever exercises the version check.
+TEST(MapFile, FuzzSeedsAreValidFilesOfThisVersion) {
+  const auto dir = std::filesystem::path(SP_SOURCE_DIR) / "fuzz" / "corpus" / "fuzz_map_file";
+  int seeds = 0;
+  for (const auto& entry : std::filesystem::directory_iterator(dir)) {
+    std::ifstream in(entry.path(), std::ios::binary);
+    const std::vector<std::uint8_t> file((std::istreambuf_iterator<char>(in)),
+                                         std::istreambuf_iterator<char>());
+    ASSERT_GT(file.size(), 1u) << entry.path();
+    std::vector<std::uint8_t> bytes(file.begin() + 1, file.end());  // the first byte picks the fuzzer's mode
+    EXPECT_NO_THROW(parse_map(bytes, entry.path().string())) << entry.path();
+    ++seeds;
+  }
+  EXPECT_GE(seeds, 2);
+}
+
 TEST(MapFile, ResealedStructuralDamageIsStillRejected) {
   // A file whose checksums were recomputed after damage reaches the record checks.
   auto bytes = saved_bytes("reseal.spmap");
@@ -384,9 +436,9 @@ TEST(MapFile, ResealedStructuralDamageIsStillRejected) {
   reseal_map_bytes(ok);
   EXPECT_EQ(ok, bytes);  // resealing an intact file changes nothing
   EXPECT_NO_THROW(parse_map(ok, "ok.spmap"));
-  // First keyframe record: u32 count, id, frame, stamp, 7 pose doubles, u32 n, then the first feature;
-  // its octave is the sixth 4-byte field.
-  const std::size_t octave_at = sections[1] + 12 + 4 + 8 + 8 + 8 + 56 + 4 + 20;
+  // First keyframe record: u32 count, id, frame, stamp, u32 map id, 7 pose doubles, u32 n, then the
+  // first feature; its octave is the sixth 4-byte field.
+  const std::size_t octave_at = sections[1] + 12 + 4 + 8 + 8 + 8 + 4 + 56 + 4 + 20;
   bytes[octave_at] = 99;
   reseal_map_bytes(bytes);
   const std::string msg = parse_error(bytes);

@@ -9,11 +9,13 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <map>
 #include <random>
 
 #include "../support/synthetic_frame.hpp"
 #include "stillpoint/common/error.hpp"
+#include "stillpoint/map/map_file.hpp"
 #include "stillpoint/tracking/tracker.hpp"
 
 namespace sp::track {
@@ -186,6 +188,42 @@ TEST_F(Atlas, NoNewMapFromAFrameWithTooFewDepthFeatures) {
   EXPECT_EQ(feed(*t, i, 9.0).state, TrackingState::Ok);
   EXPECT_EQ(t->atlas_stats().maps_created, 2u);
   EXPECT_EQ(t->current_map(), map::MapId{1});
+}
+
+// A map file written while two maps were open keeps them apart: on load both are open, and a frame
+// relocalised in the second tracks in the second (its frame), not in a map 0 that mixes both.
+TEST_F(Atlas, ASavedMapKeepsItsMapsApartWhenLoaded) {
+  auto t = make_tracker();
+  std::size_t i = 0;
+  for (; i < 40; ++i) ASSERT_EQ(feed(*t, i, 0.02 * static_cast<double>(i)).state, TrackingState::Ok) << i;
+  double x = 9.0;
+  for (; i < 40 + kLostBeforeNewMap + 20; ++i, x -= 0.02) feed(*t, i, x);
+  ASSERT_EQ(t->open_maps().size(), 2u);
+  ASSERT_EQ(t->current_map(), map::MapId{1});
+  const auto file = std::filesystem::path(SP_TEST_TMP_DIR) / "atlas_two_maps.spmap";
+  std::filesystem::create_directories(file.parent_path());
+  map::MapFileInfo info;
+  info.camera = cam_;
+  map::save_map(map_, file, info);
+
+  map::Map loaded;
+  map::load_map(file, loaded);
+  {
+    map::MapReader a = map_.reader(), b = loaded.reader();
+    EXPECT_EQ(b.live_maps().size(), 2u);
+    for (map::KeyframeId k : a.keyframe_ids_sorted()) {
+      ASSERT_NE(b.keyframe(k), nullptr) << k;
+      EXPECT_EQ(b.keyframe(k)->map_id, a.keyframe(k)->map_id) << k;
+    }
+  }
+  Tracker again(loaded, config_, cam_, depth_, map::ScalePyramid::make(8, 1.2), 30.0);
+  again.start_in_existing_map();
+  EXPECT_EQ(again.open_maps(), (std::vector<map::MapId>{map::kFirstMap, map::MapId{1}}));
+  // Where map 1 was made: relocalised there, tracked in map 1.
+  Frame f = testing::synthetic_frame(world_, camera_at(x + 0.02), 1000, cam_, depth_.bf);
+  const TrackOutcome o = again.track(f, {});
+  EXPECT_TRUE(o.relocalized);
+  EXPECT_EQ(again.current_map(), map::MapId{1});
 }
 
 TEST(AtlasConfig, KeyIsReadAndRangeChecked) {

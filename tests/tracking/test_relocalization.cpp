@@ -151,7 +151,7 @@ TEST_F(Relocalization, ProviderCandidatesAreTriedFirst) {
   config_.relocalization_verify_frames = 0;
   auto t = make_tracker();
   std::vector<map::KeyframeId> asked;
-  t->set_relocalization_candidates([&asked](map::MapView& view, const Frame&) {
+  t->set_relocalization_candidates([&asked](const map::MapReader& view, const Frame&) {
     std::vector<map::KeyframeId> ids = view.keyframe_ids_sorted();
     asked.push_back(ids.front());
     return std::vector<map::KeyframeId>{ids.front()};

@@ -173,6 +173,7 @@ Keyframe read_keyframe(ByteReader& r, const MapFileInfo& info) {
   kf.id = r.u64();
   kf.frame_index = r.u64();
   kf.stamp = r.finite64("stamp");
+  kf.map_id = MapId{r.u32()};
   kf.T_cw = read_pose(r);
   const std::uint32_t n = r.u32();
   constexpr std::size_t kFeatureBytes = 5 * 4 + 4 + 2 * 4 + kDescBytes + 8;
@@ -301,6 +302,10 @@ void validate_references(MapContents& m, const std::string& file) {
       // Parents are always older keyframes (map.cpp keeps this), which also rules out cycles.
       if (kf.parent >= kf.id)
         fail(fmt::format("keyframe {} has parent {} that is not older", kf.id, kf.parent));
+      // Maps not merged yet share no edge: each has its own spanning tree.
+      if (const Keyframe& parent = m.keyframes[kf_at.at(kf.parent)]; parent.map_id != kf.map_id)
+        fail(fmt::format("keyframe {} (map {}) has spanning-tree parent {} in map {}", kf.id,
+                         to_int(kf.map_id), kf.parent, to_int(parent.map_id)));
     }
   }
   for (Keyframe& kf : m.keyframes) {
@@ -373,6 +378,7 @@ MapContents snapshot_map(Map& map, const MapFileInfo& info) {
     kf.id = id;
     kf.frame_index = src.frame_index;
     kf.stamp = src.stamp;
+    kf.map_id = src.map_id;
     kf.T_cw = src.T_cw;
     kf.features = src.features;
     kf.thumbnail = src.thumbnail;
@@ -472,6 +478,7 @@ std::vector<std::uint8_t> serialize_map(const MapContents& m) {
       w.u64(kf.id);
       w.u64(kf.frame_index);
       w.f64(kf.stamp);
+      w.u32(to_int(kf.map_id));
       write_pose(w, kf.T_cw);
       const auto& f = kf.features;
       w.u32(static_cast<std::uint32_t>(f.size()));
@@ -596,14 +603,16 @@ MapContents parse_map(std::span<const std::uint8_t> bytes, const std::string& na
     } else if (expected == kTagKeyframes) {
       const std::uint32_t n = r.u32();
       if (n != n_keyframes) r.fail(fmt::format("{} keyframes, the header says {}", n, n_keyframes));
-      r.need_records(n, 100);
+      r.need_records(n, 108);  // a keyframe without features, edges or thumbnail
       m.keyframes.reserve(n);
       for (std::uint32_t i = 0; i < n; ++i) m.keyframes.push_back(read_keyframe(r, m.info));
       r.expect_end();
     } else if (expected == kTagPoints) {
       const std::uint32_t n = r.u32();
       if (n != n_points) r.fail(fmt::format("{} map points, the header says {}", n, n_points));
-      r.need_records(n, 160);
+      // A point with its one required observation: 132 bytes + 12 (160 refused valid maps whose
+      // points were mostly seen once, as a first keyframe's depth points are).
+      r.need_records(n, 144);
       m.points.reserve(n);
       for (std::uint32_t i = 0; i < n; ++i) m.points.push_back(read_point(r));
       r.expect_end();

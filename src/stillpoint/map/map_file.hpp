@@ -24,7 +24,7 @@
 
 namespace sp::map {
 
-inline constexpr std::uint32_t kMapFormatVersion = 1;
+inline constexpr std::uint32_t kMapFormatVersion = 2;  // 2: keyframes carry their map id
 
 // What a map file records besides the records: enough to refuse a map built for another camera or
 // pyramid, and to tell the user when the vocabulary differs from the one the map was built with.

@@ -121,7 +121,7 @@ void SlamSystem::attach_relocalization_index() {
     });
   }
   tracker_.set_relocalization_candidates(
-      [index = reloc_index_.get(), n = config_.tracker.relocalization_candidates](map::MapView&,
+      [index = reloc_index_.get(), n = config_.tracker.relocalization_candidates](const map::MapReader&,
                                                                                   const track::Frame& frame) {
         return index->candidates(frame.features.descriptors, n);
       });
@@ -129,7 +129,7 @@ void SlamSystem::attach_relocalization_index() {
   // would otherwise crowd them out of the query's 80 % rule.
   tracker_.set_other_map_candidates(
       [index = reloc_index_.get(), n = config_.tracker.relocalization_candidates](
-          map::MapView& view, const track::Frame& frame, map::MapId current) {
+          const map::MapReader& view, const track::Frame& frame, map::MapId current) {
         return index->candidates(frame.features.descriptors, n, [&view, current](map::KeyframeId id) {
           const map::Keyframe* kf = view.keyframe(id);
           return kf == nullptr || kf->bad || kf->map_id == current;
@@ -248,20 +248,20 @@ void SlamSystem::load_map(const std::filesystem::path& file) {
     if (closer_) closer_->add_existing_keyframes(keyframes);
     candidates = "bow";
   } else {
-    tracker_.set_relocalization_candidates(
-        [n = config_.tracker.relocalization_candidates](map::MapView& view, const track::Frame& frame) {
-          const cv::Mat query = tiny_image(frame.thumbnail);
-          std::vector<std::pair<double, map::KeyframeId>> scored;
-          for (map::KeyframeId id : view.keyframe_ids_sorted()) {
-            const cv::Mat t = tiny_image(view.keyframe(id)->thumbnail);
-            const double s = query.empty() || t.empty() ? -1.0 : query.dot(t);
-            scored.emplace_back(-s, id);
-          }
-          std::sort(scored.begin(), scored.end());
-          std::vector<map::KeyframeId> out;
-          for (std::size_t i = 0; i < scored.size() && i < n; ++i) out.push_back(scored[i].second);
-          return out;
-        });
+    tracker_.set_relocalization_candidates([n = config_.tracker.relocalization_candidates](
+                                               const map::MapReader& view, const track::Frame& frame) {
+      const cv::Mat query = tiny_image(frame.thumbnail);
+      std::vector<std::pair<double, map::KeyframeId>> scored;
+      for (map::KeyframeId id : view.keyframe_ids_sorted()) {
+        const cv::Mat t = tiny_image(view.keyframe(id)->thumbnail);
+        const double s = query.empty() || t.empty() ? -1.0 : query.dot(t);
+        scored.emplace_back(-s, id);
+      }
+      std::sort(scored.begin(), scored.end());
+      std::vector<map::KeyframeId> out;
+      for (std::size_t i = 0; i < scored.size() && i < n; ++i) out.push_back(scored[i].second);
+      return out;
+    });
   }
   map_file_stats_["map_loaded"] = {
       {"file", file.string()}, {"keyframes", keyframes.size()},    {"points", points},
@@ -272,10 +272,9 @@ void SlamSystem::load_map(const std::filesystem::path& file) {
 
 map::MapSaveResult SlamSystem::save_map(const std::filesystem::path& file) {
   if (tracker_.open_maps().size() > 1) {
-    // Map files keep no map ids: an unmerged map's keyframes load as part of map 0, in their own frame.
-    spdlog::warn(
-        "saving {} maps that were never merged as one map: their frames differ; a loaded copy mixes them",
-        tracker_.open_maps().size());
+    // Each keyframe keeps its map id in the file, so a loaded copy keeps the maps apart (all open).
+    spdlog::info("saving {} maps that were never merged; each keeps its own frame and map id",
+                 tracker_.open_maps().size());
   }
   map::MapFileInfo info;
   info.camera = camera_.intrinsics;

@@ -68,10 +68,14 @@ void Tracker::start_in_existing_map() {
   reference_ = map::kNoKeyframe;
   velocity_.reset();
   refiner_.reset();
-  // The loaded map is map 0 (map files keep no map ids). Without a trusted pose yet no new map starts.
-  current_map_ = map::kFirstMap;
-  open_maps_ = {map::kFirstMap};
-  next_map_ = 1;
+  // The file's maps stay apart (their keyframes keep their map ids): all are open, the oldest is
+  // current until a relocalisation says where the camera is. Without a trusted pose no new map starts.
+  const map::MapReader view = map_.reader();
+  open_maps_ = view.live_maps();
+  std::sort(open_maps_.begin(), open_maps_.end());
+  if (open_maps_.empty()) open_maps_ = {map::kFirstMap};
+  current_map_ = open_maps_.front();
+  next_map_ = map::to_int(open_maps_.back()) + 1;
 }
 
 TrackOutcome Tracker::track(Frame& frame, const MappingStatus& mapping) {

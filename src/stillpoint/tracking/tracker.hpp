@@ -101,10 +101,11 @@ struct AtlasStats {
 
 // Relocalisation candidates from anywhere in the map (a BoW keyframe database, a whole-image score),
 // best first. Called with the tracker's map view held: it must not take the map lock itself.
-using RelocalizationCandidates = std::function<std::vector<map::KeyframeId>(map::MapView&, const Frame&)>;
+using RelocalizationCandidates =
+    std::function<std::vector<map::KeyframeId>(const map::MapReader&, const Frame&)>;
 // The same query restricted to keyframes of maps other than `current` (map merging), best first.
 using OtherMapCandidates =
-    std::function<std::vector<map::KeyframeId>(map::MapView&, const Frame&, map::MapId current)>;
+    std::function<std::vector<map::KeyframeId>(const map::MapReader&, const Frame&, map::MapId current)>;
 
 class Tracker {
  public:
@@ -155,7 +156,9 @@ class Tracker {
   bool relocalize(Frame& frame);
   // Relocalisation's search: the first candidate keyframe that gives the frame a pose with
   // min_inliers_after_reloc local-map inliers (frame.T_cw, matches and the local map set), or kNoKeyframe.
-  map::KeyframeId locate(map::MapView& view, Frame& frame, const std::vector<map::KeyframeId>& candidates,
+  // Copies what it reads under short reads (a candidate's keyframe, then its local map) and matches and
+  // solves on the copies without the lock.
+  map::KeyframeId locate(Frame& frame, const std::vector<map::KeyframeId>& candidates,
                          PointCounterUpdates& counters);
   // Atlas: a lost frame starts a new map when lost long enough (TrackerConfig::new_map_after_lost_frames).
   [[nodiscard]] bool new_map_due(const Frame& frame) const;

@@ -33,35 +33,39 @@ void Tracker::accept_relocalization() {
 }
 
 bool Tracker::relocalize(Frame& frame) {
-  // Rare (the frame is lost), so one view over the whole search; the candidates' records and the
-  // local map are still read through the snapshot, as tracking does.
-  map::MapView view = map_.view(&lock_clock_);
-  // Candidates: those of the provider (a BoW query over every keyframe of the map) first, then the
-  // most recent keyframes and the covisibles of the last reference.
-  std::vector<map::KeyframeId> ids = view.keyframe_ids_sorted();
   std::vector<map::KeyframeId> candidates;
-  for (auto it = ids.rbegin(); it != ids.rend() && candidates.size() < config_.relocalization_candidates;
-       ++it) {
-    candidates.push_back(*it);
-  }
-  for (map::KeyframeId k : view.best_covisibles(reference_, 10)) {
-    if (std::find(candidates.begin(), candidates.end(), k) == candidates.end()) candidates.push_back(k);
-  }
-  if (reloc_candidates_) {
-    std::vector<map::KeyframeId> first = reloc_candidates_(view, frame);
-    for (map::KeyframeId k : candidates) {
-      if (std::find(first.begin(), first.end(), k) == first.end()) first.push_back(k);
+  {
+    // Candidates: those of the provider (a BoW query over every keyframe of the map) first, then the
+    // most recent keyframes and the covisibles of the last reference.
+    const map::MapReader view = map_.reader(&lock_clock_);
+    std::vector<map::KeyframeId> ids = view.keyframe_ids_sorted();
+    for (auto it = ids.rbegin(); it != ids.rend() && candidates.size() < config_.relocalization_candidates;
+         ++it) {
+      candidates.push_back(*it);
     }
-    candidates = std::move(first);
+    for (map::KeyframeId k : view.best_covisibles(reference_, 10)) {
+      if (std::find(candidates.begin(), candidates.end(), k) == candidates.end()) candidates.push_back(k);
+    }
+    if (reloc_candidates_) {
+      std::vector<map::KeyframeId> first = reloc_candidates_(view, frame);
+      for (map::KeyframeId k : candidates) {
+        if (std::find(first.begin(), first.end(), k) == first.end()) first.push_back(k);
+      }
+      candidates = std::move(first);
+    }
   }
-  const map::KeyframeId kid = locate(view, frame, candidates, counters_);
+  const map::KeyframeId kid = locate(frame, candidates, counters_);
   if (kid == map::kNoKeyframe) return false;
   reference_ = kid;
   last_reloc_frame_ = frame.index;
   relocalized_once_ = true;
   // Any map's keyframe may relocalise the frame: it then tracks in that map (a map left behind stays
   // open until a later frame sees both).
-  const map::MapId found_in = view.keyframe(kid)->map_id;
+  map::MapId found_in = current_map_;
+  {
+    const map::MapReader view = map_.reader(&lock_clock_);
+    if (const map::Keyframe* kf = view.keyframe(kid); kf != nullptr) found_in = kf->map_id;
+  }
   if (found_in != current_map_)
     spdlog::info("frame {} relocalised in map {} (was tracking in map {})", frame.index,
                  map::to_int(found_in), map::to_int(current_map_));
@@ -71,11 +75,14 @@ bool Tracker::relocalize(Frame& frame) {
   return true;
 }
 
-map::KeyframeId Tracker::locate(map::MapView& view, Frame& frame,
-                                const std::vector<map::KeyframeId>& candidates,
+map::KeyframeId Tracker::locate(Frame& frame, const std::vector<map::KeyframeId>& candidates,
                                 PointCounterUpdates& counters) {
   for (map::KeyframeId kid : candidates) {
-    const std::optional<LocalMapSnapshot::Keyframe> kf = snapshot_.add_keyframe(view, kid);
+    std::optional<LocalMapSnapshot::Keyframe> kf;
+    {
+      const map::MapReader view = map_.reader(&lock_clock_);
+      kf = snapshot_.add_keyframe(view, kid);
+    }
     if (!kf || kf->bad) continue;
     ++reloc_stats_.candidates_tried;
     frame.reset_matches();
@@ -111,9 +118,15 @@ map::KeyframeId Tracker::locate(map::MapView& view, Frame& frame,
     frame.has_pose = true;
     if (optimize_pose(frame) < 10) continue;
     // Recover more matches by projection before accepting.
-    update_local_map(view, frame);
+    {
+      const map::MapReader view = map_.reader(&lock_clock_);
+      update_local_map(view, frame);
+    }
     collect_local_points(frame);
-    snapshot_.copy_points(view, local_points_);
+    {
+      const map::MapReader view = map_.reader(&lock_clock_);
+      snapshot_.copy_points(view, local_points_);
+    }
     snapshot_.index_copies();
     match_local_points(snapshot_, frame, local_points_, 2.0 * config_.local_search_factor,
                        MatchContext{camera_, pyramid_, depth_.bf}, counters);
@@ -170,32 +183,35 @@ bool Tracker::merge_search_due(std::size_t frame_index) {
 }
 
 void Tracker::look_for_other_maps(Frame& frame) {
-  // Rare (only while several maps are open): one view over the search, as relocalisation.
-  map::MapView view = map_.view(&lock_clock_);
+  // Rare (only while several maps are open). As relocalisation: candidates under a short read, the
+  // search on copies, and a view only to merge.
   std::vector<map::KeyframeId> candidates;
-  auto other_map = [&](map::KeyframeId k) {
-    const map::Keyframe* kf = view.keyframe(k);
-    return kf != nullptr && !kf->bad && kf->map_id != current_map_;
-  };
-  if (pending_merge_) {
-    // Verifying: the keyframe that gave the pose and its neighbours.
-    candidates.push_back(pending_merge_->match);
-    for (map::KeyframeId k : view.best_covisibles(pending_merge_->match, 5)) candidates.push_back(k);
-  } else {
-    // The BoW database's candidates in other maps, then (without one) each other map's newest keyframes.
-    if (other_map_candidates_) {
-      candidates = other_map_candidates_(view, frame, current_map_);
-    } else if (reloc_candidates_) {
-      for (map::KeyframeId k : reloc_candidates_(view, frame))
-        if (other_map(k)) candidates.push_back(k);
+  {
+    const map::MapReader view = map_.reader(&lock_clock_);
+    auto other_map = [&](map::KeyframeId k) {
+      const map::Keyframe* kf = view.keyframe(k);
+      return kf != nullptr && !kf->bad && kf->map_id != current_map_;
+    };
+    if (pending_merge_) {
+      // Verifying: the keyframe that gave the pose and its neighbours.
+      candidates.push_back(pending_merge_->match);
+      for (map::KeyframeId k : view.best_covisibles(pending_merge_->match, 5)) candidates.push_back(k);
     } else {
-      const std::vector<map::KeyframeId> ids = view.keyframe_ids_sorted();
-      for (auto it = ids.rbegin(); it != ids.rend() && candidates.size() < config_.relocalization_candidates;
-           ++it)
-        if (other_map(*it)) candidates.push_back(*it);
+      // The BoW database's candidates in other maps, then (without one) each other map's newest keyframes.
+      if (other_map_candidates_) {
+        candidates = other_map_candidates_(view, frame, current_map_);
+      } else if (reloc_candidates_) {
+        for (map::KeyframeId k : reloc_candidates_(view, frame))
+          if (other_map(k)) candidates.push_back(k);
+      } else {
+        const std::vector<map::KeyframeId> ids = view.keyframe_ids_sorted();
+        for (auto it = ids.rbegin();
+             it != ids.rend() && candidates.size() < config_.relocalization_candidates; ++it)
+          if (other_map(*it)) candidates.push_back(*it);
+      }
     }
+    std::erase_if(candidates, [&](map::KeyframeId k) { return !other_map(k); });
   }
-  std::erase_if(candidates, [&](map::KeyframeId k) { return !other_map(k); });
   if (candidates.empty()) {
     if (pending_merge_) ++atlas_stats_.merges_rejected;
     pending_merge_.reset();
@@ -211,7 +227,7 @@ void Tracker::look_for_other_maps(Frame& frame) {
   const bool slots_fresh = local_slots_fresh_;
   refined_.assign(probe.features.size(), false);
   PointCounterUpdates ignored;  // the other map's points were not seen by a tracked frame of theirs
-  const map::KeyframeId match = locate(view, probe, candidates, ignored);
+  const map::KeyframeId match = locate(probe, candidates, ignored);
   reference_ = reference;
   local_keyframes_ = local_keyframes;
   local_points_ = local_points;
@@ -226,7 +242,13 @@ void Tracker::look_for_other_maps(Frame& frame) {
     pending_merge_.reset();
     return;
   }
-  const map::MapId other = view.keyframe(match)->map_id;
+  map::MapView view = map_.view(&lock_clock_);
+  const map::Keyframe* matched = view.keyframe(match);
+  if (matched == nullptr || matched->bad || matched->map_id == current_map_) {
+    pending_merge_.reset();  // culled, or merged by now: nothing to verify against
+    return;
+  }
+  const map::MapId other = matched->map_id;
   const geo::SE3 S_other_cur = probe.T_cw.inverse() * frame.T_cw;  // p_other = S * p_current
   if (!pending_merge_) {
     ++atlas_stats_.merge_candidates;
