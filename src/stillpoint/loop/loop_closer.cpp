@@ -334,8 +334,6 @@ bool LoopCloser::correct(VerifiedLoop loop) {
 
   // 3b. The pose graph, off the lock.
   Stopwatch solve_watch;
-  std::unordered_map<map::KeyframeId, geo::SE3> before_graph;
-  for (const auto& v : graph.vertices) before_graph[v.id] = v.T_cw;
   opt::optimize_pose_graph(graph.vertices, graph.edges, opt::PoseGraphConfig{});
   double solve_ms = solve_watch.elapsed_ms();
 
@@ -347,13 +345,11 @@ bool LoopCloser::correct(VerifiedLoop loop) {
       // no longer fits the map, so the graph is solved again from the map as it is, under the lock.
       Stopwatch again;
       graph = essential_graph(view, query, match, old_pose, loop_links);
-      before_graph.clear();
-      for (const auto& v : graph.vertices) before_graph[v.id] = v.T_cw;
       opt::optimize_pose_graph(graph.vertices, graph.edges, opt::PoseGraphConfig{});
       solve_ms += again.elapsed_ms();
     }
     // 3c. Keyframes and points take their corrections.
-    apply_pose_graph(view, graph, before_graph, corrected_by, pyramid_);
+    apply_pose_graph(view, graph, corrected_by, pyramid_);
     map_.notify_big_change();
     changes = map_.big_change_count();
     loop.hold.release(view);
@@ -422,23 +418,13 @@ void LoopCloser::run_global_ba(std::uint64_t changes_at_start) {
   }
   map::MapView view = map_.view();
   if (map_.big_change_count() != changes_at_start) return;  // another correction happened meanwhile
-  // Keyframes added while BA ran follow their spanning-tree parent's correction.
-  std::unordered_map<map::KeyframeId, std::pair<geo::SE3, geo::SE3>> change;  // old, new
+  // BA's poses replace the current ones; keyframes added while BA ran follow their parent's change.
+  KeyframeMoves change;
   for (const auto& k : problem.keyframes) {
-    map::Keyframe* kf = view.keyframe(k.id);
-    if (kf == nullptr) continue;
-    change[k.id] = {kf->T_cw, k.T_cw};
-    kf->T_cw = k.T_cw;
+    if (const map::Keyframe* kf = view.keyframe(k.id); kf != nullptr)
+      change.emplace(k.id, std::pair{kf->T_cw, k.T_cw});
   }
-  for (map::KeyframeId k : view.keyframe_ids_sorted()) {
-    if (change.contains(k)) continue;
-    map::Keyframe* kf = view.keyframe(k);
-    const auto it = change.find(kf->parent);
-    if (it == change.end()) continue;
-    const geo::SE3 old_pose = kf->T_cw;
-    kf->T_cw = kf->T_cw * it->second.first.inverse() * it->second.second;
-    change[k] = {old_pose, kf->T_cw};
-  }
+  move_keyframes(view, change);
   std::unordered_set<map::PointId> optimised;
   for (const auto& p : problem.points) {
     if (map::MapPoint* mp = view.point(p.id); mp != nullptr && !mp->bad) {
@@ -446,12 +432,9 @@ void LoopCloser::run_global_ba(std::uint64_t changes_at_start) {
       optimised.insert(p.id);
     }
   }
-  for (const auto& [pid, p] : view.points()) {
-    if (p.bad || optimised.contains(pid)) continue;
-    const auto it = change.find(p.reference);
-    if (it == change.end()) continue;
-    view.point(pid)->position = it->second.second.inverse() * (it->second.first * p.position);
-  }
+  move_points(view, change, [&optimised](map::PointId pid, const map::MapPoint& p) {
+    return optimised.contains(pid) ? map::kNoKeyframe : p.reference;
+  });
   map_.notify_big_change();
   spdlog::info("global BA done: {} keyframes, {} points", problem.keyframes.size(), problem.points.size());
 }

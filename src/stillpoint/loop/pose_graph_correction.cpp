@@ -17,6 +17,7 @@ EssentialGraph essential_graph(const map::MapReader& view, map::KeyframeId query
     const map::Keyframe* kf = view.keyframe(k);
     // Keyframes of other maps (not merged yet) share no edge with the loop's map: held as they are.
     g.vertices.push_back({k, kf->T_cw, k == ids.front() || k == match || kf->map_id != loop_map});
+    g.start.emplace(k, kf->T_cw);
     if (kf->parent != map::kNoKeyframe && old_pose.contains(kf->parent) && !view.keyframe(kf->parent)->bad) {
       g.edges.push_back({k, kf->parent, relative_old(k, kf->parent), 1.0});
     }
@@ -40,34 +41,35 @@ EssentialGraph essential_graph(const map::MapReader& view, map::KeyframeId query
   return g;
 }
 
-void apply_pose_graph(map::MapView& view, const EssentialGraph& solved,
-                      const std::unordered_map<map::KeyframeId, geo::SE3>& solved_from,
-                      const std::unordered_map<map::PointId, map::KeyframeId>& corrected_by,
-                      const map::ScalePyramid& pyramid) {
-  std::unordered_map<map::KeyframeId, std::pair<geo::SE3, geo::SE3>> change;  // from, to
-  for (const auto& v : solved.vertices) change.emplace(v.id, std::pair{solved_from.at(v.id), v.T_cw});
-  for (map::KeyframeId k : view.keyframe_ids_sorted()) {  // parents before children
+void move_keyframes(map::MapView& view, KeyframeMoves& moves) {
+  for (const auto& [k, move] : moves) {
     map::Keyframe* kf = view.keyframe(k);
-    if (const auto it = change.find(k); it != change.end()) {
-      const auto& [from, to] = it->second;
-      // Unmoved keyframes take the solution itself (bit for bit, as before the split).
-      kf->T_cw = kf->T_cw.matrix() == from.matrix() ? to : kf->T_cw * from.inverse() * to;
-      continue;
-    }
-    const auto parent = change.find(kf->parent);
-    if (parent == change.end()) continue;
+    if (kf == nullptr) continue;
+    const auto& [from, to] = move;
+    // Unmoved keyframes take the solution itself, bit for bit.
+    kf->T_cw = kf->T_cw.matrix() == from.matrix() ? to : kf->T_cw * from.inverse() * to;
+  }
+  for (map::KeyframeId k : view.keyframe_ids_sorted()) {  // parents before children
+    if (moves.contains(k)) continue;
+    map::Keyframe* kf = view.keyframe(k);
+    const auto parent = moves.find(kf->parent);
+    if (parent == moves.end()) continue;
     const geo::SE3 from = kf->T_cw;
     kf->T_cw = kf->T_cw * parent->second.first.inverse() * parent->second.second;
-    change.emplace(k, std::pair{from, kf->T_cw});
+    moves.emplace(k, std::pair{from, kf->T_cw});
   }
-  for (const auto& [pid, p] : view.points()) {
-    if (p.bad) continue;
+}
+
+void apply_pose_graph(map::MapView& view, const EssentialGraph& solved,
+                      const std::unordered_map<map::PointId, map::KeyframeId>& corrected_by,
+                      const map::ScalePyramid& pyramid) {
+  KeyframeMoves moves;
+  for (const auto& v : solved.vertices) moves.emplace(v.id, std::pair{solved.start.at(v.id), v.T_cw});
+  move_keyframes(view, moves);
+  move_points(view, moves, [&corrected_by](map::PointId pid, const map::MapPoint& p) {
     const auto by = corrected_by.find(pid);
-    const auto it = change.find(by != corrected_by.end() ? by->second : p.reference);
-    if (it == change.end()) continue;
-    map::MapPoint* mp = view.point(pid);
-    mp->position = it->second.second.inverse() * (it->second.first * mp->position);
-  }
+    return by != corrected_by.end() ? by->second : p.reference;
+  });
   for (const auto& [pid, p] : view.points()) {
     if (!p.bad) view.update_point_normal_and_depth(pid, pyramid);
   }

@@ -26,6 +26,12 @@ constexpr std::array<char, 8> kMagic = {'S', 'P', 'M', 'A', 'P', 'B', 'I', 'N'};
 constexpr std::size_t kPreambleBytes = 12;  // magic + version
 constexpr std::size_t kFrameBytes = 16;     // tag + length + crc around each payload
 constexpr int kDescBytes = 32;
+// The smallest records, for the count checks before reading. A keyframe: id, frame index, stamp, map
+// id, pose, feature / covisibility / loop-edge counts, parent, thumbnail length. A point: id, position,
+// descriptor, normal, distance range, reference and creating keyframes, counters, observation count and
+// its one required observation (a bound of 160 once refused valid maps of single-view points).
+constexpr std::size_t kMinKeyframeBytes = 8 + 8 + 8 + 4 + 7 * 8 + 4 + 4 + 4 + 8 + 4;
+constexpr std::size_t kMinPointBytes = 8 + 3 * 8 + kDescBytes + 3 * 8 + 2 * 8 + 2 * 8 + 2 * 4 + 4 + 12;
 // Bounds that keep a corrupt (but well-sealed) file from asking for absurd allocations.
 constexpr int kMaxImageSide = 16384;
 constexpr int kMaxThumbnailSide = 4096;
@@ -603,16 +609,14 @@ MapContents parse_map(std::span<const std::uint8_t> bytes, const std::string& na
     } else if (expected == kTagKeyframes) {
       const std::uint32_t n = r.u32();
       if (n != n_keyframes) r.fail(fmt::format("{} keyframes, the header says {}", n, n_keyframes));
-      r.need_records(n, 108);  // a keyframe without features, edges or thumbnail
+      r.need_records(n, kMinKeyframeBytes);
       m.keyframes.reserve(n);
       for (std::uint32_t i = 0; i < n; ++i) m.keyframes.push_back(read_keyframe(r, m.info));
       r.expect_end();
     } else if (expected == kTagPoints) {
       const std::uint32_t n = r.u32();
       if (n != n_points) r.fail(fmt::format("{} map points, the header says {}", n, n_points));
-      // A point with its one required observation: 132 bytes + 12 (160 refused valid maps whose
-      // points were mostly seen once, as a first keyframe's depth points are).
-      r.need_records(n, 144);
+      r.need_records(n, kMinPointBytes);
       m.points.reserve(n);
       for (std::uint32_t i = 0; i < n; ++i) m.points.push_back(read_point(r));
       r.expect_end();
