@@ -10,6 +10,7 @@
 
 #include "stillpoint/geometry/lie.hpp"
 #include "stillpoint/map/feature_set.hpp"
+#include "stillpoint/map/observation_list.hpp"
 #include "stillpoint/map/types.hpp"
 
 namespace sp::map {
@@ -53,7 +54,7 @@ struct MapPoint {
   cv::Mat descriptor;  // 1 x 32 representative descriptor (min median distance)
   Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();  // mean viewing direction
   double min_distance = 0, max_distance = 0;          // scale-invariance distances
-  std::map<KeyframeId, int> observations;             // keyframe -> feature index
+  ObservationList observations;                       // keyframe -> feature index, by keyframe id
   KeyframeId reference = kNoKeyframe;
   KeyframeId first_keyframe = kNoKeyframe;
   int visible = 1;  // times it projected into a tracked frame

@@ -417,10 +417,10 @@ void Tracker::collect_local_points(const Frame& frame) {
   local_points_.clear();
   seen_.clear();
   for (std::size_t i = 0; i < frame.points.size(); ++i) {
-    if (frame.points[i] != map::kNoPoint) seen_.insert(frame.points[i]);
+    if (frame.points[i] != map::kNoPoint) seen_.try_emplace(frame.points[i], 0);
   }
   for (map::PointId pid : local_slots_) {
-    if (pid == map::kNoPoint || !seen_.insert(pid).second) continue;
+    if (pid == map::kNoPoint || !seen_.try_emplace(pid, 0).second) continue;
     local_points_.push_back(pid);
   }
 }
