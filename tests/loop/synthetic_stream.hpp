@@ -23,7 +23,7 @@ inline Stream make_stream(const std::vector<int>& places, int per_place, std::ui
   std::mt19937 rng(seed);
   Stream s;
   double yaw = 0.0;
-  KeyframeId id = 0;
+  std::uint64_t id = 0;  // keyframe i has id i: ids index the per-keyframe vectors
   for (std::size_t p = 0; p < places.size(); ++p) {
     yaw += 0.4;
     for (int j = 0; j < per_place; ++j) {
@@ -42,7 +42,7 @@ inline Stream make_stream(const std::vector<int>& places, int per_place, std::ui
         e.emplace_back(noise(rng), wt);
       }
       KeyframeInfo kf;
-      kf.id = id++;
+      kf.id = KeyframeId{id++};
       kf.R_cw = Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitY()).toRotationMatrix();
       kf.bow = BowVector::from_entries(std::move(e));
       kf.bow.normalize_l1();
@@ -63,11 +63,12 @@ class TemporalView final : public CovisibilityView {
   void set_newest(KeyframeId id) { newest_ = id; }
   [[nodiscard]] std::vector<KeyframeId> covisible(KeyframeId id, int n_best) const override {
     std::vector<KeyframeId> out;
-    for (KeyframeId d = 1; d <= newest_ + 1; ++d) {
-      for (const KeyframeId o : {id - d, id + d}) {
-        if (o > newest_) continue;  // also catches id - d wrapping below 0
-        const bool near = d <= static_cast<KeyframeId>(radius_);
-        if (near || std::abs(stream_.visit[o] - stream_.visit[id]) <= 1) out.push_back(o);
+    const std::uint64_t n = id.value(), newest = newest_.value();
+    for (std::uint64_t d = 1; d <= newest + 1; ++d) {
+      for (const std::uint64_t o : {n - d, n + d}) {
+        if (o > newest) continue;  // also catches n - d wrapping below 0
+        const bool near = d <= static_cast<std::uint64_t>(radius_);
+        if (near || std::abs(stream_.visit[o] - stream_.visit[n]) <= 1) out.emplace_back(o);
       }
     }
     if (n_best > 0 && out.size() > static_cast<std::size_t>(n_best))
@@ -78,7 +79,7 @@ class TemporalView final : public CovisibilityView {
  private:
   const Stream& stream_;
   int radius_;
-  KeyframeId newest_ = 0;
+  KeyframeId newest_;
 };
 
 struct RunResult {

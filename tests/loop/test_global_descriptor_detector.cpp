@@ -50,8 +50,8 @@ TEST(GlobalDescriptorLoopDetector, FindsPlantedRevisit) {
   const auto r = run_global(stream);
   ASSERT_FALSE(r.candidates.empty());
   for (const auto& c : r.candidates) {
-    EXPECT_GE(c.query, 80U) << "a candidate before the revisit";
-    EXPECT_EQ(stream.place[c.query], stream.place[c.match]) << "wrong place";
+    EXPECT_GE(c.query.value(), 80U) << "a candidate before the revisit";
+    EXPECT_EQ(stream.place[c.query.value()], stream.place[c.match.value()]) << "wrong place";
     EXPECT_GT(c.score, 0.0);
     EXPECT_LE(c.score, 1.0);
   }
@@ -100,7 +100,7 @@ TEST(GlobalDescriptorLoopDetector, RejectsKeyframesWithoutDescriptorOrOfAnotherS
   det->detect(a, view);
   KeyframeInfo b = stream.keyframes[1];
   b.global = Eigen::VectorXf::Ones(16).normalized();
-  view.set_newest(1);
+  view.set_newest(KeyframeId{1});
   EXPECT_THROW(det->detect(b, view), Error);
 }
 

@@ -9,6 +9,8 @@
 namespace sp::loop {
 namespace {
 
+using namespace map::literals;
+
 Eigen::Matrix3d yaw(double a) {
   return Eigen::AngleAxisd(a, Eigen::Vector3d(0.3, 1.0, 0.2).normalized()).toRotationMatrix();
 }
@@ -21,9 +23,9 @@ std::vector<std::size_t> segment(const std::vector<double>& steps, const Sequenc
   SequenceSegmenter seg(p);
   std::vector<std::size_t> sizes;
   double a = 0.2;
-  KeyframeId id = 0;
+  std::uint64_t id = 0;
   auto feed = [&](double angle) {
-    if (auto s = seg.add(id, yaw(angle), one_word(static_cast<WordId>(id))))
+    if (auto s = seg.add(KeyframeId{id}, yaw(angle), one_word(static_cast<WordId>(id))))
       sizes.push_back(s->keyframes.size());
     ++id;
   };
@@ -68,16 +70,17 @@ TEST(SequenceSegmenterPaper, RisingEdgeStartsANewSequenceFallingEdgeDoesNot) {
   // keyframe 4 (θ1 = 0.5 > θ_T, θ2 = 0.01 < θ_T): it joins.
   SequenceSegmenter seg(p);
   double a = 0.0;
-  KeyframeId id = 0;
+  std::uint64_t id = 0;
   std::vector<std::vector<KeyframeId>> closed;
   for (double st : {0.0, 0.01, 0.01, 0.5, 0.01, 0.01}) {
     a += st;
-    if (auto s = seg.add(id, yaw(a), one_word(static_cast<WordId>(id)))) closed.push_back(s->keyframes);
+    if (auto s = seg.add(KeyframeId{id}, yaw(a), one_word(static_cast<WordId>(id))))
+      closed.push_back(s->keyframes);
     ++id;
   }
   ASSERT_EQ(closed.size(), 1U);
-  EXPECT_EQ(closed[0], (std::vector<KeyframeId>{0, 1, 2}));
-  EXPECT_EQ(seg.open_keyframes(), (std::vector<KeyframeId>{3, 4, 5}));
+  EXPECT_EQ(closed[0], (std::vector<KeyframeId>{0_kf, 1_kf, 2_kf}));
+  EXPECT_EQ(seg.open_keyframes(), (std::vector<KeyframeId>{3_kf, 4_kf, 5_kf}));
   // A turn from the start, then still: the falling edge never starts a sequence.
   EXPECT_EQ(segment({0.5, 0.5, 0.01, 0.01}, p), (std::vector<std::size_t>{5}));
   // Two turns: a sequence per rising edge.
@@ -135,13 +138,13 @@ TEST(SequenceSegmenterLevel, LengthCapAndIds) {
   EXPECT_EQ(segment(std::vector<double>(9, 0.0), p), (std::vector<std::size_t>{4, 4, 2}));
   p.short_sequences_grow = false;  // the strict reading: a one-keyframe sequence closes on a turn
   SequenceSegmenter seg(p);
-  EXPECT_FALSE(seg.add(7, yaw(0), one_word(1)).has_value());
-  const auto closed = seg.add(8, yaw(1.0), one_word(2));
+  EXPECT_FALSE(seg.add(7_kf, yaw(0), one_word(1)).has_value());
+  const auto closed = seg.add(8_kf, yaw(1.0), one_word(2));
   ASSERT_TRUE(closed.has_value());
   EXPECT_EQ(closed->id, 0U);
-  EXPECT_EQ(closed->keyframes, (std::vector<KeyframeId>{7}));
+  EXPECT_EQ(closed->keyframes, (std::vector<KeyframeId>{7_kf}));
   EXPECT_EQ(seg.open_id(), 1U);
-  EXPECT_EQ(seg.open_keyframes(), (std::vector<KeyframeId>{8}));
+  EXPECT_EQ(seg.open_keyframes(), (std::vector<KeyframeId>{8_kf}));
 }
 
 TEST(SequenceSegmenterLevel, ShortSequencesTakeTheNextKeyframeWhateverTheTurn) {
@@ -159,8 +162,8 @@ TEST(SequenceSegmenterLevel, ShortSequencesTakeTheNextKeyframeWhateverTheTurn) {
 
 TEST(SequenceSegmenter, SequenceVectorIsNormalisedSum) {
   SequenceSegmenter seg(SequenceParams{});
-  seg.add(0, yaw(0), BowVector::from_entries({{1, 3.0}, {2, 1.0}}));  // normalised: .75 .25
-  seg.add(1, yaw(0.01), BowVector::from_entries({{2, 10.0}}));        // normalised: 1
+  seg.add(0_kf, yaw(0), BowVector::from_entries({{1, 3.0}, {2, 1.0}}));  // normalised: .75 .25
+  seg.add(1_kf, yaw(0.01), BowVector::from_entries({{2, 10.0}}));        // normalised: 1
   const auto s = seg.flush();
   ASSERT_TRUE(s.has_value());
   EXPECT_NEAR(s->bow.l1_norm(), 1.0, 1e-12);

@@ -256,7 +256,7 @@ TEST_F(LoopCloserTest, ThePoseGraphSolvedOffTheLockLandsOnTheMapAsItBecame) {
   }
   auto solved = [&](map::KeyframeId k) {
     for (const auto& v : graph.vertices)
-      if (v.id == k) return v.T_cw;
+      if (v.id == k.value()) return v.T_cw;
     throw std::logic_error("no vertex");
   };
   const map::KeyframeId moved = ids_[20], parent = ids_[30], untouched = ids_[10];

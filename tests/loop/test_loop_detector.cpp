@@ -8,6 +8,7 @@ namespace {
 
 using testing::make_stream;
 using testing::run;
+using namespace map::literals;
 
 std::vector<int> path_with_revisit() {
   std::vector<int> places;
@@ -29,9 +30,9 @@ void expect_revisit_found(const std::string& method) {
   const auto r = run(*det, stream);
   ASSERT_FALSE(r.candidates.empty()) << method;
   for (const auto& c : r.candidates) {
-    EXPECT_GE(c.query, 80U) << method << ": a candidate before the revisit";
-    EXPECT_EQ(stream.place[c.query], stream.place[c.match]) << method << ": wrong place";
-    EXPECT_LT(c.match, 80U);
+    EXPECT_GE(c.query.value(), 80U) << method << ": a candidate before the revisit";
+    EXPECT_EQ(stream.place[c.query.value()], stream.place[c.match.value()]) << method << ": wrong place";
+    EXPECT_LT(c.match.value(), 80U);
   }
 }
 
@@ -91,11 +92,11 @@ TEST(LoopDetectors, ShortSequencesNeverCloseALoop) {
 
 TEST(GroupConsistency, NeedsConsecutiveOverlappingGroups) {
   GroupConsistency c(3);
-  EXPECT_EQ(c.update({{1, 2, 3}}), std::vector<bool>{false});
-  EXPECT_EQ(c.update({{3, 4}}), std::vector<bool>{false});
-  EXPECT_EQ(c.update({{4, 5}, {50}}), (std::vector<bool>{true, false}));
+  EXPECT_EQ(c.update({{1_kf, 2_kf, 3_kf}}), std::vector<bool>{false});
+  EXPECT_EQ(c.update({{3_kf, 4_kf}}), std::vector<bool>{false});
+  EXPECT_EQ(c.update({{4_kf, 5_kf}, {50_kf}}), (std::vector<bool>{true, false}));
   EXPECT_EQ(c.update({}), std::vector<bool>{});  // a query without candidates breaks the chain
-  EXPECT_EQ(c.update({{5, 6}}), std::vector<bool>{false});
+  EXPECT_EQ(c.update({{5_kf, 6_kf}}), std::vector<bool>{false});
 }
 
 TEST(KeyframeDatabase, QueryCountsAndErase) {
@@ -109,7 +110,7 @@ TEST(KeyframeDatabase, QueryCountsAndErase) {
   EXPECT_EQ(hits[0].id, 1U);
   EXPECT_EQ(hits[0].common_words, 3U);
   EXPECT_NEAR(hits[0].score, 1.0, 1e-12);
-  hits = db.query(q, 0.1, [](KeyframeId id) { return id == 1; });
+  hits = db.query(q, 0.1, [](EntryId id) { return id == 1; });
   ASSERT_EQ(hits.size(), 1U);
   EXPECT_EQ(hits[0].id, 2U);
   db.erase(1);

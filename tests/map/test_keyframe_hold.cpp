@@ -7,6 +7,8 @@
 namespace sp::map {
 namespace {
 
+using namespace sp::map::literals;
+
 struct Chain {
   Map map;
   std::vector<KeyframeId> kfs;  // the first is the root (never erased); the others have parents
@@ -68,7 +70,7 @@ TEST(KeyframeHold, NeverHoldsACulledKeyframe) {
   MapView v = c.map.view();
   ASSERT_TRUE(v.erase_keyframe(c.kfs[2]));
   EXPECT_FALSE(hold.add(v, c.kfs[2]));
-  EXPECT_FALSE(hold.add(v, 999));
+  EXPECT_FALSE(hold.add(v, 999_kf));
   EXPECT_TRUE(hold.keyframes().empty());
   EXPECT_TRUE(v.hold_keyframe(c.kfs[0]));  // the root may be held (it is never culled anyway)
   v.release_keyframe(c.kfs[0]);

@@ -16,6 +16,8 @@
 namespace sp::map {
 namespace {
 
+using namespace sp::map::literals;
+
 std::filesystem::path scratch(const std::string& name) {
   const auto dir = std::filesystem::path(SP_TEST_TMP_DIR) / "map_file";
   std::filesystem::create_directories(dir);
@@ -111,7 +113,7 @@ void build_map(Map& map) {
   for (KeyframeId k : kfs) v.update_connections(k);
   v.keyframe(kfs[4])->loop_edges.insert(kfs[0]);
   v.keyframe(kfs[0])->loop_edges.insert(kfs[4]);
-  v.erase_point(7);                               // bad point: not saved
+  v.erase_point(7_pt);                            // bad point: not saved
   v.erase_keyframe(kfs[3]);                       // culled keyframe: not saved, its child is re-parented
   v.keyframe(kfs[4])->loop_edges.insert(kfs[3]);  // an edge into a culled keyframe is dropped on save
 }
@@ -154,7 +156,7 @@ TEST(MapFile, RoundTripKeepsEveryField) {
   EXPECT_EQ(children, 3U);
   EXPECT_EQ(thumbs, 3U);
   for (KeyframeId id : a.keyframe_ids_sorted()) {
-    SCOPED_TRACE("keyframe " + std::to_string(id));
+    SCOPED_TRACE("keyframe " + std::to_string(id.value()));
     const Keyframe& x = *a.keyframe(id);
     const Keyframe* y = b.keyframe(id);
     ASSERT_NE(y, nullptr);
@@ -198,7 +200,7 @@ TEST(MapFile, RoundTripKeepsEveryField) {
       EXPECT_EQ(b.point(id), nullptr);
       continue;
     }
-    SCOPED_TRACE("point " + std::to_string(id));
+    SCOPED_TRACE("point " + std::to_string(id.value()));
     const MapPoint* q = b.point(id);
     ASSERT_NE(q, nullptr);
     EXPECT_EQ(q->position, p.position);
@@ -377,20 +379,21 @@ TEST(MapFile, DanglingIdsAreRejected) {
     MapContents m = crafted();
     const auto it = std::find(m.keyframes[0].points.begin(), m.keyframes[0].points.end(), kNoPoint);
     ASSERT_NE(it, m.keyframes[0].points.end());
-    *it = m.next_point_id - 1 == m.points.back().id ? m.points.back().id + 100 : m.next_point_id - 1;
-    m.next_point_id = *it + 1;
+    const PointId last_handed_out{m.next_point_id.value() - 1};
+    *it = last_handed_out == m.points.back().id ? PointId{m.points.back().id.value() + 100} : last_handed_out;
+    m.next_point_id = PointId{it->value() + 1};
     EXPECT_NE(parse_error(serialize_map(m)).find("references missing point"), std::string::npos);
   }
   {
     MapContents m = crafted();
-    m.keyframes[1].covisibility[4000] = 20;
-    m.next_keyframe_id = 5000;
+    m.keyframes[1].covisibility[4000_kf] = 20;
+    m.next_keyframe_id = 5000_kf;
     EXPECT_NE(parse_error(serialize_map(m)).find("covisibility edge to missing keyframe 4000"),
               std::string::npos);
   }
   {
     MapContents m = crafted();
-    m.keyframes[2].parent = 4;  // keyframe 4 was culled
+    m.keyframes[2].parent = 4_kf;  // keyframe 4 was culled
     EXPECT_NE(parse_error(serialize_map(m)).find("missing spanning-tree parent 4"), std::string::npos);
   }
   {
@@ -401,12 +404,12 @@ TEST(MapFile, DanglingIdsAreRejected) {
   }
   {
     MapContents m = crafted();
-    m.points[0].observations[4] = 0;
+    m.points[0].observations[4_kf] = 0;
     EXPECT_NE(parse_error(serialize_map(m)).find("observed by missing keyframe 4"), std::string::npos);
   }
   {
     MapContents m = crafted();
-    m.points[3].reference = 4;
+    m.points[3].reference = 4_kf;
     EXPECT_NE(parse_error(serialize_map(m)).find("reference keyframe 4"), std::string::npos);
   }
 }

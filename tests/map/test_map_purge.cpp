@@ -86,7 +86,7 @@ TEST(MapPurge, RetiredPointsGoAndCulledKeyframesShrinkToTheirTreeLink) {
   MapView v = f.map.view();
   const std::size_t points_before = v.points().size();
   const Keyframe before = *v.keyframe(f.culled);
-  EXPECT_EQ(v.purge_bad(v.next_ids().first + 1), 3U);  // two points, one keyframe
+  EXPECT_EQ(v.purge_bad(KeyframeId{v.next_ids().first.value() + 1}), 3U);  // two points, one keyframe
   EXPECT_EQ(v.points().size(), points_before - 2);
   EXPECT_EQ(v.point(f.erased), nullptr);
   EXPECT_EQ(v.point(f.replaced), nullptr);
@@ -115,7 +115,7 @@ TEST(MapPurge, RetiredPointsGoAndCulledKeyframesShrinkToTheirTreeLink) {
 TEST(MapPurge, PurgingTwiceFreesNothingMore) {
   Fixture f;
   MapView v = f.map.view();
-  const KeyframeId later = v.next_ids().first + 5;
+  const KeyframeId later{v.next_ids().first.value() + 5};
   EXPECT_EQ(v.purge_bad(later), 3U);
   EXPECT_EQ(v.purge_bad(later), 0U);
 }

@@ -19,7 +19,7 @@ TEST(MapReader, ReadsWhatAViewWroteAndHandsOutConstRecordsOnly) {
   }
   MapReader reader = map.reader();
   static_assert(std::is_same_v<decltype(reader.point(pid)), const MapPoint*>);
-  static_assert(std::is_same_v<decltype(reader.keyframe(1)), const Keyframe*>);
+  static_assert(std::is_same_v<decltype(reader.keyframe(KeyframeId{1})), const Keyframe*>);
   ASSERT_NE(reader.live_point(pid), nullptr);
   EXPECT_EQ(reader.live_points(), 1u);
   EXPECT_EQ(reader.live_keyframes(), 0u);

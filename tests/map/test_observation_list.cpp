@@ -11,6 +11,8 @@
 namespace sp::map {
 namespace {
 
+using namespace literals;
+
 void expect_same(const ObservationList& list, const std::map<KeyframeId, int>& reference) {
   ASSERT_EQ(list.size(), reference.size());
   EXPECT_EQ(list.empty(), reference.empty());
@@ -24,12 +26,12 @@ void expect_same(const ObservationList& list, const std::map<KeyframeId, int>& r
 
 TEST(ObservationList, BehavesAsTheStdMapItReplacesUnderRandomEdits) {
   std::mt19937 rng(7);
-  std::uniform_int_distribution<KeyframeId> keyframe(1, 40);
+  std::uniform_int_distribution<std::uint64_t> keyframe(1, 40);
   std::uniform_int_distribution<int> feature(0, 999), op(0, 5);
   ObservationList list;
   std::map<KeyframeId, int> reference;
   for (int step = 0; step < 5000; ++step) {
-    const KeyframeId kf = keyframe(rng);
+    const KeyframeId kf{keyframe(rng)};
     const int f = feature(rng);
     switch (op(rng)) {
       case 0: {
@@ -72,15 +74,15 @@ TEST(ObservationList, BehavesAsTheStdMapItReplacesUnderRandomEdits) {
 }
 
 TEST(ObservationList, AtThrowsForAKeyframeNotObservedAndTheFirstEntryIsTheLowestId) {
-  ObservationList list{{9, 3}, {2, 5}, {9, 7}};  // a repeated keyframe keeps its first feature
+  ObservationList list{{9_kf, 3}, {2_kf, 5}, {9_kf, 7}};  // a repeated keyframe keeps its first feature
   ASSERT_EQ(list.size(), 2u);
-  EXPECT_EQ(list.begin()->first, 2u);
-  EXPECT_EQ(list.at(9), 3);
-  EXPECT_THROW((void)list.at(4), std::out_of_range);
+  EXPECT_EQ(list.begin()->first, 2_kf);
+  EXPECT_EQ(list.at(9_kf), 3);
+  EXPECT_THROW((void)list.at(4_kf), std::out_of_range);
   const ObservationList copy = list;
   EXPECT_EQ(copy, list);
-  list[4];  // operator[] inserts a zero feature, as std::map's does
-  EXPECT_EQ(list.at(4), 0);
+  list[4_kf];  // operator[] inserts a zero feature, as std::map's does
+  EXPECT_EQ(list.at(4_kf), 0);
   EXPECT_FALSE(copy == list);
 }
 

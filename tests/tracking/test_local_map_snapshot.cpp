@@ -56,11 +56,11 @@ TEST_F(LocalMapSnapshotTest, CopiesFollowReplacementsAndAnswerUnderBothIds) {
   EXPECT_EQ(p->descriptor[0], 11);
   EXPECT_EQ(p->max_distance, 4.0);
   EXPECT_EQ(s.anchor_feature(*p, kf_), 1);
-  EXPECT_EQ(s.anchor_feature(*p, kf_ + 1), -1);  // not an anchor given to reset()
+  EXPECT_EQ(s.anchor_feature(*p, map::KeyframeId{kf_.value() + 1}), -1);  // not an anchor given to reset()
   EXPECT_EQ(s.size(), 2u);
   ASSERT_NE(s.pose(kf_), nullptr);
   EXPECT_EQ(s.pose(kf_)->T_cw.translation(), Eigen::Vector3d(0.1, 0.2, 0.3));
-  EXPECT_EQ(s.pose(kf_ + 1), nullptr);
+  EXPECT_EQ(s.pose(map::KeyframeId{kf_.value() + 1}), nullptr);
 }
 
 TEST_F(LocalMapSnapshotTest, APointCulledBetweenTwoReadsIsForgotten) {
@@ -94,7 +94,7 @@ TEST_F(LocalMapSnapshotTest, AKeyframeCopyHoldsItsLivePointsAndAngles) {
   EXPECT_EQ(kf->angles[2], 45.f);
   EXPECT_EQ(kf->descriptors.rows, 3);
   EXPECT_NE(s.live_point(ids_[2]), nullptr);
-  EXPECT_FALSE(s.add_keyframe(view, kf_ + 7).has_value());
+  EXPECT_FALSE(s.add_keyframe(view, map::KeyframeId{kf_.value() + 7}).has_value());
 }
 
 TEST_F(LocalMapSnapshotTest, CountersAreWrittenToThePointsStillAlive) {

@@ -148,7 +148,8 @@ TrackResult System::Impl::track(const sp::io::FrameData& frame) {
   out.culled_features = report.culled;
   out.keyframe = report.keyframe;
   out.culled_points = std::move(report.culled_points);
-  if (report.keyframe && on_keyframe) on_keyframe({report.keyframe_id, frame.stamp, out.T_world_camera});
+  if (report.keyframe && on_keyframe)
+    on_keyframe({report.keyframe_id.value(), frame.stamp, out.T_world_camera});
   report_loops();
   return out;
 }

@@ -1,5 +1,6 @@
 #pragma once
 // A hash index from non-zero 64-bit ids (map point / keyframe ids; 0 is "none" there) to a slot number,
+// keyed by a plain number or by an id type with value() (map::PointId),
 // for tables rebuilt every frame: open addressing with linear probing in one flat array, so inserting
 // allocates nothing once the capacity is reached and clear() keeps the memory. Erase shifts the
 // following entries back (no tombstones), so lookups stay short after many erases.
@@ -7,18 +8,43 @@
 #include <cstddef>
 #include <cstdint>
 #include <stdexcept>
+#include <type_traits>
 #include <utility>
 #include <vector>
 
 namespace sp {
 
-class IdIndex {
+template <class Id>
+class BasicIdIndex {
  public:
   using Key = std::uint64_t;
   using Value = std::size_t;
 
+  [[nodiscard]] const Value* find(Id id) const { return find_key(key_of(id)); }
+  std::pair<Value, bool> try_emplace(Id id, Value value) { return try_emplace_key(key_of(id), value); }
+  void insert_or_assign(Id id, Value value) { insert_or_assign_key(key_of(id), value); }
+  bool erase(Id id) { return erase_key(key_of(id)); }
+
+  void clear() {
+    if (size_ == 0) return;
+    std::fill(slots_.begin(), slots_.end(), Slot{});
+    size_ = 0;
+  }
+
+  [[nodiscard]] std::size_t size() const { return size_; }
+  [[nodiscard]] bool empty() const { return size_ == 0; }
+
+ private:
+  static Key key_of(Id id) {
+    if constexpr (std::is_integral_v<Id>) {
+      return static_cast<Key>(id);
+    } else {
+      return id.value();
+    }
+  }
+
   // The value stored for `key`, nullptr when none.
-  [[nodiscard]] const Value* find(Key key) const {
+  [[nodiscard]] const Value* find_key(Key key) const {
     if (size_ == 0 || key == kEmpty) return nullptr;
     for (std::size_t i = home(key);; i = next(i)) {
       const Slot& s = slots_[i];
@@ -28,7 +54,7 @@ class IdIndex {
   }
 
   // Inserts (key, value) unless the key is there; returns its stored value and whether it was inserted.
-  std::pair<Value, bool> try_emplace(Key key, Value value) {
+  std::pair<Value, bool> try_emplace_key(Key key, Value value) {
     Slot& s = locate(key);
     if (s.key == key) return {s.value, false};
     s = Slot{key, value};
@@ -36,14 +62,14 @@ class IdIndex {
     return {value, true};
   }
 
-  void insert_or_assign(Key key, Value value) {
+  void insert_or_assign_key(Key key, Value value) {
     Slot& s = locate(key);
     if (s.key != key) ++size_;
     s = Slot{key, value};
   }
 
   // Removes the key if present; returns whether it was.
-  bool erase(Key key) {
+  bool erase_key(Key key) {
     if (size_ == 0 || key == kEmpty) return false;
     std::size_t i = home(key);
     while (slots_[i].key != key) {
@@ -66,16 +92,6 @@ class IdIndex {
     return true;
   }
 
-  void clear() {
-    if (size_ == 0) return;
-    std::fill(slots_.begin(), slots_.end(), Slot{});
-    size_ = 0;
-  }
-
-  [[nodiscard]] std::size_t size() const { return size_; }
-  [[nodiscard]] bool empty() const { return size_ == 0; }
-
- private:
   static constexpr Key kEmpty = 0;
   struct Slot {
     Key key = kEmpty;
@@ -117,5 +133,7 @@ class IdIndex {
   std::size_t size_ = 0;
   int shift_ = 64;
 };
+
+using IdIndex = BasicIdIndex<std::uint64_t>;
 
 }  // namespace sp

@@ -5,7 +5,7 @@
 
 namespace sp::loop {
 
-void KeyframeDatabase::erase_locked(std::unordered_map<KeyframeId, Slot>::iterator it) {
+void KeyframeDatabase::erase_locked(std::unordered_map<EntryId, Slot>::iterator it) {
   const Slot slot = it->second;
   Entry& e = entries_[slot];
   for (const auto& [word, w] : e.bow) std::erase(inverted_[word], slot);
@@ -14,7 +14,7 @@ void KeyframeDatabase::erase_locked(std::unordered_map<KeyframeId, Slot>::iterat
   slot_of_.erase(it);
 }
 
-void KeyframeDatabase::add(KeyframeId id, const BowVector& bow) {
+void KeyframeDatabase::add(EntryId id, const BowVector& bow) {
   std::lock_guard lock(mutex_);
   if (auto it = slot_of_.find(id); it != slot_of_.end()) erase_locked(it);
   Slot slot = 0;
@@ -33,7 +33,7 @@ void KeyframeDatabase::add(KeyframeId id, const BowVector& bow) {
   slot_of_.emplace(id, slot);
 }
 
-void KeyframeDatabase::erase(KeyframeId id) {
+void KeyframeDatabase::erase(EntryId id) {
   std::lock_guard lock(mutex_);
   if (auto it = slot_of_.find(id); it != slot_of_.end()) erase_locked(it);
 }
@@ -46,7 +46,7 @@ void KeyframeDatabase::clear() {
   slot_of_.clear();
 }
 
-bool KeyframeDatabase::contains(KeyframeId id) const {
+bool KeyframeDatabase::contains(EntryId id) const {
   std::lock_guard lock(mutex_);
   return slot_of_.contains(id);
 }
@@ -56,7 +56,7 @@ std::size_t KeyframeDatabase::size() const {
   return slot_of_.size();
 }
 
-std::optional<double> KeyframeDatabase::score(KeyframeId id, const BowVector& bow) const {
+std::optional<double> KeyframeDatabase::score(EntryId id, const BowVector& bow) const {
   std::lock_guard lock(mutex_);
   const auto it = slot_of_.find(id);
   if (it == slot_of_.end()) return std::nullopt;
@@ -64,7 +64,7 @@ std::optional<double> KeyframeDatabase::score(KeyframeId id, const BowVector& bo
   return l1_score(entries_[it->second].bow, bow);
 }
 
-std::optional<BowVector> KeyframeDatabase::bow(KeyframeId id) const {
+std::optional<BowVector> KeyframeDatabase::bow(EntryId id) const {
   std::lock_guard lock(mutex_);
   const auto it = slot_of_.find(id);
   if (it == slot_of_.end()) return std::nullopt;
@@ -72,7 +72,7 @@ std::optional<BowVector> KeyframeDatabase::bow(KeyframeId id) const {
 }
 
 std::vector<DatabaseHit> KeyframeDatabase::query(const BowVector& query, double min_common_ratio,
-                                                 const std::function<bool(KeyframeId)>& exclude) const {
+                                                 const std::function<bool(EntryId)>& exclude) const {
   std::lock_guard lock(mutex_);
   ++queries_;
   enum : std::uint8_t { kUnknown, kKept, kExcluded };

@@ -13,10 +13,11 @@
 
 namespace sp::loop {
 
-using KeyframeId = std::uint64_t;
+// What the caller files an entry under (a keyframe id's number, a keyframe sequence's id).
+using EntryId = std::uint64_t;
 
 struct DatabaseHit {
-  KeyframeId id = 0;
+  EntryId id = 0;
   std::uint32_t common_words = 0;
   double score = 0.0;  // L1 score against the query
 };
@@ -24,22 +25,22 @@ struct DatabaseHit {
 class KeyframeDatabase {
  public:
   // Files `bow` under `id` (replacing an earlier vector of the same id). Keeps a copy of the vector.
-  void add(KeyframeId id, const BowVector& bow);
+  void add(EntryId id, const BowVector& bow);
   // Removes `id` from the inverted file; unknown ids are ignored.
-  void erase(KeyframeId id);
+  void erase(EntryId id);
   void clear();
 
-  [[nodiscard]] bool contains(KeyframeId id) const;
+  [[nodiscard]] bool contains(EntryId id) const;
   [[nodiscard]] std::size_t size() const;
   // L1 score of a filed vector against `bow`; nullopt for an unknown id. Counted as a scored pair.
-  [[nodiscard]] std::optional<double> score(KeyframeId id, const BowVector& bow) const;
-  [[nodiscard]] std::optional<BowVector> bow(KeyframeId id) const;
+  [[nodiscard]] std::optional<double> score(EntryId id, const BowVector& bow) const;
+  [[nodiscard]] std::optional<BowVector> bow(EntryId id) const;
 
   // One database query: the entries sharing words with `query`, except those `exclude` rejects,
   // that share at least min_common_ratio x (the largest number of shared words), each scored.
   // Sorted by score, best first. Counts one query and one scored pair per returned hit.
   [[nodiscard]] std::vector<DatabaseHit> query(const BowVector& query, double min_common_ratio,
-                                               const std::function<bool(KeyframeId)>& exclude = {}) const;
+                                               const std::function<bool(EntryId)>& exclude = {}) const;
 
   [[nodiscard]] std::size_t queries() const;
   [[nodiscard]] std::size_t scored_pairs() const;
@@ -49,16 +50,16 @@ class KeyframeDatabase {
   // summed sequence vectors have thousands of words, each touching several inverted lists.
   using Slot = std::uint32_t;
   struct Entry {
-    KeyframeId id = 0;
+    EntryId id = 0;
     BowVector bow;
   };
-  void erase_locked(std::unordered_map<KeyframeId, Slot>::iterator it);
+  void erase_locked(std::unordered_map<EntryId, Slot>::iterator it);
 
   mutable std::mutex mutex_;
   std::vector<std::vector<Slot>> inverted_;  // indexed by word
   std::vector<Entry> entries_;               // indexed by slot
   std::vector<Slot> free_slots_;
-  std::unordered_map<KeyframeId, Slot> slot_of_;
+  std::unordered_map<EntryId, Slot> slot_of_;
   mutable std::size_t queries_ = 0;
   mutable std::size_t scored_ = 0;
 };

@@ -255,7 +255,7 @@ std::vector<LoopCandidate> SequenceLoopDetector::query_sequence(const KeyframeSe
     return it == keyframe_bow_.end() ? nullptr : it->second.get();
   };
   for (const auto& g : kept) {
-    LoopCandidate best{0, 0, -1.0};
+    LoopCandidate best{KeyframeId{}, KeyframeId{}, -1.0};
     double best_match = -1.0;
     for (KeyframeId b : sequences_[g.best].keyframes) {
       const BowVector* mb = bow_of(b);

@@ -28,8 +28,12 @@
 #include "stillpoint/common/config_reader.hpp"
 #include "stillpoint/loop/bow_vector.hpp"
 #include "stillpoint/loop/keyframe_database.hpp"
+#include "stillpoint/map/types.hpp"
 
 namespace sp::loop {
+
+// Loop detection speaks of the map's keyframes; only the BoW database files plain entry numbers.
+using KeyframeId = map::KeyframeId;
 
 using SequenceId = std::uint64_t;
 

@@ -99,7 +99,7 @@ void LoopCloser::flush() {
     stats_.detection_ms_total += watch.elapsed_ms();
     stats_.candidates += candidates.size();
   }
-  map::KeyframeId last = 0;
+  map::KeyframeId last;
   {
     map::MapView view = map_.view();
     const auto ids = view.keyframe_ids_sorted();
@@ -146,7 +146,7 @@ void LoopCloser::process(map::KeyframeId kid) {
   if (needs_global_descriptors()) {
     if (!describe_) throw Error("loop detector 'netvlad' needs a place model (set_global_describer)");
     if (thumbnail.empty())
-      throw Error("loop detector 'netvlad': keyframe " + std::to_string(kid) + " has no thumbnail");
+      throw Error("loop detector 'netvlad': keyframe " + std::to_string(kid.value()) + " has no thumbnail");
     Stopwatch global_watch;
     info.global = describe_(thumbnail);
     global_ms = global_watch.elapsed_ms();
@@ -160,7 +160,8 @@ void LoopCloser::process(map::KeyframeId kid) {
   const MapCovisibility covisibility(map_);
   Stopwatch watch;
   // Right after a loop, or on a small map, the keyframe is only filed.
-  if (keyframes < config_.min_keyframes || (last_loop_keyframe_ != 0 && kid < last_loop_keyframe_ + 10)) {
+  if (keyframes < config_.min_keyframes ||
+      (last_loop_keyframe_ != map::kNoKeyframe && kid.value() < last_loop_keyframe_.value() + 10)) {
     detector_->add_keyframe(info);
   } else {
     candidates = detector_->detect(info, covisibility);
@@ -382,7 +383,7 @@ void LoopCloser::run_global_ba(std::uint64_t changes_at_start) {
     for (map::MapId m : view.live_maps()) roots.push_back(view.map_root(m));
     for (map::KeyframeId k : ids) {
       const bool root = std::find(roots.begin(), roots.end(), k) != roots.end();
-      problem.keyframes.push_back({k, view.keyframe(k)->T_cw, k == ids.front() || root});
+      problem.keyframes.push_back({k.value(), view.keyframe(k)->T_cw, k == ids.front() || root});
     }
     std::vector<map::PointId> pids;
     for (const auto& [pid, p] : view.points()) {
@@ -391,13 +392,13 @@ void LoopCloser::run_global_ba(std::uint64_t changes_at_start) {
     std::sort(pids.begin(), pids.end());
     for (map::PointId pid : pids) {
       const map::MapPoint* p = view.point(pid);
-      problem.points.push_back({pid, p->position});
+      problem.points.push_back({pid.value(), p->position});
       for (const auto& [k, feature] : p->observations) {
         const map::Keyframe* kf = view.keyframe(k);
         if (kf == nullptr || kf->bad) continue;
         const auto& kp = kf->features.keypoints[static_cast<std::size_t>(feature)];
-        problem.observations.push_back({k,
-                                        pid,
+        problem.observations.push_back({k.value(),
+                                        pid.value(),
                                         {kp.pt.x, kp.pt.y},
                                         kf->features.u_right[static_cast<std::size_t>(feature)],
                                         pyramid_.inv_level_sigma2[static_cast<std::size_t>(kp.octave)]});
@@ -421,15 +422,15 @@ void LoopCloser::run_global_ba(std::uint64_t changes_at_start) {
   // BA's poses replace the current ones; keyframes added while BA ran follow their parent's change.
   KeyframeMoves change;
   for (const auto& k : problem.keyframes) {
-    if (const map::Keyframe* kf = view.keyframe(k.id); kf != nullptr)
-      change.emplace(k.id, std::pair{kf->T_cw, k.T_cw});
+    if (const map::Keyframe* kf = view.keyframe(map::KeyframeId{k.id}); kf != nullptr)
+      change.emplace(map::KeyframeId{k.id}, std::pair{kf->T_cw, k.T_cw});
   }
   move_keyframes(view, change);
   std::unordered_set<map::PointId> optimised;
   for (const auto& p : problem.points) {
-    if (map::MapPoint* mp = view.point(p.id); mp != nullptr && !mp->bad) {
+    if (map::MapPoint* mp = view.point(map::PointId{p.id}); mp != nullptr && !mp->bad) {
       mp->position = p.p_w;
-      optimised.insert(p.id);
+      optimised.insert(map::PointId{p.id});
     }
   }
   move_points(view, change, [&optimised](map::PointId pid, const map::MapPoint& p) {

@@ -132,7 +132,7 @@ class LoopCloser {
   std::unique_ptr<LoopDetector> detector_;
   GlobalDescriber describe_;
   KeyframeFiled filed_;
-  std::size_t last_loop_keyframe_ = 0;
+  map::KeyframeId last_loop_keyframe_;
 
   mutable std::mutex stats_mutex_;
   LoopClosingStats stats_;

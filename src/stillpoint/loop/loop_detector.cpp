@@ -91,9 +91,9 @@ KeyframeLoopDetector::KeyframeLoopDetector(const LoopDetectorParams& params)
   params_.validate();
 }
 
-void KeyframeLoopDetector::add_keyframe(const KeyframeInfo& kf) { db_.add(kf.id, kf.bow); }
+void KeyframeLoopDetector::add_keyframe(const KeyframeInfo& kf) { db_.add(kf.id.value(), kf.bow); }
 
-void KeyframeLoopDetector::erase_keyframe(KeyframeId id) { db_.erase(id); }
+void KeyframeLoopDetector::erase_keyframe(KeyframeId id) { db_.erase(id.value()); }
 
 std::size_t KeyframeLoopDetector::queries() const { return db_.queries(); }
 
@@ -116,7 +116,7 @@ std::vector<LoopCandidate> KeyframeLoopDetector::detect(const KeyframeInfo& quer
   double min_score = 1.0;
   bool any = false;
   for (KeyframeId c : connected) {
-    if (const auto s = db_.score(c, query.bow)) {
+    if (const auto s = db_.score(c.value(), query.bow)) {
       min_score = std::min(min_score, *s);
       any = true;
     }
@@ -125,10 +125,10 @@ std::vector<LoopCandidate> KeyframeLoopDetector::detect(const KeyframeInfo& quer
   std::vector<DatabaseHit> hits;
   if (any) {
     hits = db_.query(query.bow, params_.min_common_ratio,
-                     [&](KeyframeId id) { return id == query.id || excluded.contains(id); });
+                     [&](EntryId id) { return id == query.id.value() || excluded.contains(KeyframeId{id}); });
   }
   std::unordered_map<KeyframeId, double> hit_score;
-  for (const auto& h : hits) hit_score[h.id] = h.score;
+  for (const auto& h : hits) hit_score[KeyframeId{h.id}] = h.score;
 
   // Accumulate each candidate's score over its covisibility group; the group's best keyframe stands for it.
   struct GroupScore {
@@ -140,8 +140,8 @@ std::vector<LoopCandidate> KeyframeLoopDetector::detect(const KeyframeInfo& quer
   double best_acc = 0.0;
   for (const auto& h : hits) {
     if (h.score < min_score) continue;
-    GroupScore g{h.id, h.score, h.score};
-    for (KeyframeId n : view.covisible(h.id, params_.group_size)) {
+    GroupScore g{KeyframeId{h.id}, h.score, h.score};
+    for (KeyframeId n : view.covisible(g.best, params_.group_size)) {
       const auto it = hit_score.find(n);
       if (it == hit_score.end()) continue;
       g.acc += it->second;
@@ -173,7 +173,7 @@ std::vector<LoopCandidate> KeyframeLoopDetector::detect(const KeyframeInfo& quer
   std::sort(out.begin(), out.end(),
             [](const LoopCandidate& a, const LoopCandidate& b) { return a.score > b.score; });
   stats_.candidates += out.size();
-  db_.add(query.id, query.bow);
+  db_.add(query.id.value(), query.bow);
   return out;
 }
 

@@ -22,16 +22,16 @@
 namespace sp::loop {
 
 struct KeyframeInfo {
-  KeyframeId id = 0;
+  KeyframeId id;
   Eigen::Matrix3d R_cw = Eigen::Matrix3d::Identity();  // world-to-camera rotation
   BowVector bow;                                       // L1-normalised
   Eigen::VectorXf global;  // learned global descriptor (netvlad detector only; empty otherwise)
 };
 
 struct LoopCandidate {
-  KeyframeId query = 0;  // a keyframe of the query (sequence mode: any keyframe of the closed sequence)
-  KeyframeId match = 0;  // the earlier keyframe it is believed to revisit
-  double score = 0.0;    // L1 score between the two keyframes' vectors
+  KeyframeId query;    // a keyframe of the query (sequence mode: any keyframe of the closed sequence)
+  KeyframeId match;    // the earlier keyframe it is believed to revisit
+  double score = 0.0;  // L1 score between the two keyframes' vectors
 };
 
 // What the detectors need from the map; implemented by the integrator over the covisibility graph.

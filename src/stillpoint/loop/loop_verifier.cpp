@@ -137,7 +137,7 @@ LoopVerification LoopVerifier::match_and_align(const LoopEvidence& e) const {
   geo::RansacSe3Config rc;
   rc.inlier_threshold = config_.ransac_threshold_m;
   rc.min_inliers = config_.min_ransac_inliers;
-  rc.seed = static_cast<std::uint32_t>(query);
+  rc.seed = static_cast<std::uint32_t>(query.value());
   const auto ransac = geo::estimate_se3_ransac(src, dst, rc);
   if (!ransac) {
     spdlog::debug("loop candidate {}->{}: RANSAC failed on {} matches", query, match, matches.size());

@@ -16,14 +16,14 @@ EssentialGraph essential_graph(const map::MapReader& view, map::KeyframeId query
     if (!old_pose.contains(k)) continue;
     const map::Keyframe* kf = view.keyframe(k);
     // Keyframes of other maps (not merged yet) share no edge with the loop's map: held as they are.
-    g.vertices.push_back({k, kf->T_cw, k == ids.front() || k == match || kf->map_id != loop_map});
+    g.vertices.push_back({k.value(), kf->T_cw, k == ids.front() || k == match || kf->map_id != loop_map});
     g.start.emplace(k, kf->T_cw);
     if (kf->parent != map::kNoKeyframe && old_pose.contains(kf->parent) && !view.keyframe(kf->parent)->bad) {
-      g.edges.push_back({k, kf->parent, relative_old(k, kf->parent), 1.0});
+      g.edges.push_back({k.value(), kf->parent.value(), relative_old(k, kf->parent), 1.0});
     }
     for (const auto& [other, w] : kf->covisibility) {
       if (other < k && w >= 100 && other != kf->parent && old_pose.contains(other)) {
-        g.edges.push_back({k, other,
+        g.edges.push_back({k.value(), other.value(),
                            loop_links.contains({other, k}) ? kf->T_cw * view.keyframe(other)->T_cw.inverse()
                                                            : relative_old(k, other),
                            1.0});
@@ -33,7 +33,7 @@ EssentialGraph essential_graph(const map::MapReader& view, map::KeyframeId query
       if (other >= k || !old_pose.contains(other)) continue;
       const bool new_edge = (k == query && other == match) || (k == match && other == query);
       // The new loop edge is measured with the corrected pose; old loop edges keep their geometry.
-      g.edges.push_back({k, other,
+      g.edges.push_back({k.value(), other.value(),
                          new_edge ? kf->T_cw * view.keyframe(other)->T_cw.inverse() : relative_old(k, other),
                          1.0});
     }
@@ -64,7 +64,10 @@ void apply_pose_graph(map::MapView& view, const EssentialGraph& solved,
                       const std::unordered_map<map::PointId, map::KeyframeId>& corrected_by,
                       const map::ScalePyramid& pyramid) {
   KeyframeMoves moves;
-  for (const auto& v : solved.vertices) moves.emplace(v.id, std::pair{solved.start.at(v.id), v.T_cw});
+  for (const auto& v : solved.vertices) {
+    const map::KeyframeId id{v.id};
+    moves.emplace(id, std::pair{solved.start.at(id), v.T_cw});
+  }
   move_keyframes(view, moves);
   move_points(view, moves, [&corrected_by](map::PointId pid, const map::MapPoint& p) {
     const auto by = corrected_by.find(pid);

@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "stillpoint/common/error.hpp"
+#include "stillpoint/map/types.hpp"
 
 namespace sp::map {
 
@@ -38,6 +39,10 @@ class ByteWriter {
   void u8(std::uint8_t v) { buf_.push_back(v); }
   void u32(std::uint32_t v) { put(v); }
   void u64(std::uint64_t v) { put(v); }
+  template <class Tag>
+  void id(Id<Tag> v) {
+    put(v.value());
+  }
   void i32(std::int32_t v) { u32(static_cast<std::uint32_t>(v)); }
   void f32(float v) { u32(std::bit_cast<std::uint32_t>(v)); }
   void f64(double v) { u64(std::bit_cast<std::uint64_t>(v)); }
@@ -88,6 +93,10 @@ class ByteReader {
   }
   std::uint32_t u32() { return get<std::uint32_t>(); }
   std::uint64_t u64() { return get<std::uint64_t>(); }
+  template <class IdType>
+  IdType id() {
+    return IdType{get<std::uint64_t>()};
+  }
   std::int32_t i32() { return static_cast<std::int32_t>(u32()); }
   float f32() { return std::bit_cast<float>(u32()); }
   double f64() { return std::bit_cast<double>(u64()); }

@@ -157,8 +157,8 @@ class Map {
   std::mutex mutex_;
   std::unordered_map<KeyframeId, Keyframe> keyframes_;
   std::unordered_map<PointId, MapPoint> points_;
-  KeyframeId next_keyframe_id_ = 1;
-  PointId next_point_id_ = 1;
+  KeyframeId next_keyframe_id_{1};
+  PointId next_point_id_{1};
   std::atomic<std::uint64_t> big_changes_{0};
 };
 

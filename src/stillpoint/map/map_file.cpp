@@ -142,10 +142,11 @@ MapFileInfo read_head(ByteReader& r, std::uint64_t& n_keyframes, std::uint64_t& 
   MapFileInfo info;
   n_keyframes = r.u64();
   n_points = r.u64();
-  next_kf = r.u64();
-  next_pt = r.u64();
-  if (next_kf == 0 || next_pt == 0) r.fail("id counters must be at least 1");
-  if (n_keyframes >= next_kf || n_points >= next_pt) r.fail("more records than ids handed out");
+  next_kf = r.id<KeyframeId>();
+  next_pt = r.id<PointId>();
+  if (next_kf == kNoKeyframe || next_pt == kNoPoint) r.fail("id counters must be at least 1");
+  if (n_keyframes >= next_kf.value() || n_points >= next_pt.value())
+    r.fail("more records than ids handed out");
   auto& c = info.camera;
   c.width = r.i32();
   c.height = r.i32();
@@ -176,7 +177,7 @@ MapFileInfo read_head(ByteReader& r, std::uint64_t& n_keyframes, std::uint64_t& 
 
 Keyframe read_keyframe(ByteReader& r, const MapFileInfo& info) {
   Keyframe kf;
-  kf.id = r.u64();
+  kf.id = r.id<KeyframeId>();
   kf.frame_index = r.u64();
   kf.stamp = r.finite64("stamp");
   kf.map_id = MapId{r.u32()};
@@ -203,21 +204,21 @@ Keyframe read_keyframe(ByteReader& r, const MapFileInfo& info) {
     f.depth[i] = r.finite32("feature depth");
     f.u_right[i] = r.finite32("feature right coordinate");
     std::memcpy(f.descriptors.ptr<std::uint8_t>(static_cast<int>(i)), r.bytes(kDescBytes), kDescBytes);
-    kf.points[i] = r.u64();
+    kf.points[i] = r.id<PointId>();
   }
   const std::uint32_t n_cov = r.u32();
   r.need_records(n_cov, 12);
   for (std::uint32_t i = 0; i < n_cov; ++i) {
-    const KeyframeId other = r.u64();
+    const KeyframeId other = r.id<KeyframeId>();
     const int w = r.i32();
     if (w < 0) r.fail(fmt::format("keyframe {}: negative covisibility weight", kf.id));
     if (!kf.covisibility.emplace(other, w).second)
       r.fail(fmt::format("keyframe {}: covisibility edge to {} listed twice", kf.id, other));
   }
-  kf.parent = r.u64();
+  kf.parent = r.id<KeyframeId>();
   const std::uint32_t n_loop = r.u32();
   r.need_records(n_loop, 8);
-  for (std::uint32_t i = 0; i < n_loop; ++i) kf.loop_edges.insert(r.u64());
+  for (std::uint32_t i = 0; i < n_loop; ++i) kf.loop_edges.insert(r.id<KeyframeId>());
   const std::uint32_t jpeg_len = r.u32();
   if (jpeg_len > 0) {
     const std::uint8_t* p = r.bytes(jpeg_len);
@@ -236,7 +237,7 @@ Keyframe read_keyframe(ByteReader& r, const MapFileInfo& info) {
 
 MapPoint read_point(ByteReader& r) {
   MapPoint p;
-  p.id = r.u64();
+  p.id = r.id<PointId>();
   p.position = r.vec3("point position");
   p.descriptor = cv::Mat(1, kDescBytes, CV_8U);
   std::memcpy(p.descriptor.ptr<std::uint8_t>(0), r.bytes(kDescBytes), kDescBytes);
@@ -245,15 +246,15 @@ MapPoint read_point(ByteReader& r) {
   p.max_distance = r.finite64("point max distance");
   if (p.min_distance < 0 || p.max_distance < p.min_distance)
     r.fail(fmt::format("point {}: distance range [{}, {}] is invalid", p.id, p.min_distance, p.max_distance));
-  p.reference = r.u64();
-  p.first_keyframe = r.u64();
+  p.reference = r.id<KeyframeId>();
+  p.first_keyframe = r.id<KeyframeId>();
   p.visible = r.i32();
   p.found = r.i32();
   if (p.visible < 0 || p.found < 0) r.fail(fmt::format("point {}: negative visible/found counters", p.id));
   const std::uint32_t n_obs = r.u32();
   r.need_records(n_obs, 12);
   for (std::uint32_t i = 0; i < n_obs; ++i) {
-    const KeyframeId kid = r.u64();
+    const KeyframeId kid = r.id<KeyframeId>();
     const std::uint32_t feature = r.u32();
     if (feature > static_cast<std::uint32_t>(std::numeric_limits<int>::max()))
       r.fail(fmt::format("point {}: feature index {} out of range", p.id, feature));
@@ -376,8 +377,8 @@ MapContents snapshot_map(Map& map, const MapFileInfo& info) {
                                       [&](const auto& o) { return live_kf.contains(o.first); });
     if (observed) live_pt.insert(id);
   }
-  KeyframeId max_kf = 0;
-  PointId max_pt = 0;
+  KeyframeId max_kf;
+  PointId max_pt;
   for (KeyframeId id : view.keyframe_ids_sorted()) {
     const Keyframe& src = *view.keyframe(id);
     Keyframe kf;
@@ -448,8 +449,8 @@ MapContents snapshot_map(Map& map, const MapFileInfo& info) {
   }
   // The map's own counters, so ids are never reused after the loaded map grows again.
   const auto [next_kf, next_pt] = view.next_ids();
-  m.next_keyframe_id = std::max(next_kf, max_kf + 1);
-  m.next_point_id = std::max(next_pt, max_pt + 1);
+  m.next_keyframe_id = std::max(next_kf, KeyframeId{max_kf.value() + 1});
+  m.next_point_id = std::max(next_pt, PointId{max_pt.value() + 1});
   return m;
 }
 
@@ -464,8 +465,8 @@ std::vector<std::uint8_t> serialize_map(const MapContents& m) {
     ByteWriter w;
     w.u64(m.keyframes.size());
     w.u64(m.points.size());
-    w.u64(m.next_keyframe_id);
-    w.u64(m.next_point_id);
+    w.id(m.next_keyframe_id);
+    w.id(m.next_point_id);
     const auto& c = m.info.camera;
     w.i32(c.width);
     w.i32(c.height);
@@ -481,7 +482,7 @@ std::vector<std::uint8_t> serialize_map(const MapContents& m) {
     ByteWriter w;
     w.u32(static_cast<std::uint32_t>(m.keyframes.size()));
     for (const Keyframe& kf : m.keyframes) {
-      w.u64(kf.id);
+      w.id(kf.id);
       w.u64(kf.frame_index);
       w.f64(kf.stamp);
       w.u32(to_int(kf.map_id));
@@ -499,16 +500,16 @@ std::vector<std::uint8_t> serialize_map(const MapContents& m) {
         w.f32(i < f.depth.size() ? f.depth[i] : -1.f);
         w.f32(i < f.u_right.size() ? f.u_right[i] : -1.f);
         write_descriptor(w, f.descriptors, static_cast<int>(i));
-        w.u64(i < kf.points.size() ? kf.points[i] : kNoPoint);
+        w.id(i < kf.points.size() ? kf.points[i] : kNoPoint);
       }
       w.u32(static_cast<std::uint32_t>(kf.covisibility.size()));
       for (const auto& [other, weight] : kf.covisibility) {
-        w.u64(other);
+        w.id(other);
         w.i32(weight);
       }
-      w.u64(kf.parent);
+      w.id(kf.parent);
       w.u32(static_cast<std::uint32_t>(kf.loop_edges.size()));
-      for (KeyframeId other : kf.loop_edges) w.u64(other);
+      for (KeyframeId other : kf.loop_edges) w.id(other);
       const auto jpeg = encode_thumbnail(kf.thumbnail);
       w.u32(static_cast<std::uint32_t>(jpeg.size()));
       w.bytes(jpeg.data(), jpeg.size());
@@ -519,19 +520,19 @@ std::vector<std::uint8_t> serialize_map(const MapContents& m) {
     ByteWriter w;
     w.u32(static_cast<std::uint32_t>(m.points.size()));
     for (const MapPoint& p : m.points) {
-      w.u64(p.id);
+      w.id(p.id);
       w.vec3(p.position);
       write_descriptor(w, p.descriptor, 0);
       w.vec3(p.normal);
       w.f64(p.min_distance);
       w.f64(p.max_distance);
-      w.u64(p.reference);
-      w.u64(p.first_keyframe);
+      w.id(p.reference);
+      w.id(p.first_keyframe);
       w.i32(p.visible);
       w.i32(p.found);
       w.u32(static_cast<std::uint32_t>(p.observations.size()));
       for (const auto& [kid, feature] : p.observations) {
-        w.u64(kid);
+        w.id(kid);
         w.u32(static_cast<std::uint32_t>(feature));
       }
     }

@@ -46,8 +46,8 @@ struct MapContents {
   MapFileInfo info;
   std::vector<Keyframe> keyframes;  // sorted by id; `children` and the feature grid rebuilt
   std::vector<MapPoint> points;     // sorted by id
-  KeyframeId next_keyframe_id = 1;
-  PointId next_point_id = 1;
+  KeyframeId next_keyframe_id{1};
+  PointId next_point_id{1};
 };
 
 struct MapSaveResult {

@@ -60,8 +60,8 @@ LocalMappingStats LocalMapper::process(map::KeyframeId kid, const std::atomic<bo
   if (config_.local_ba) local_bundle_adjustment(kid, abort, stats);
   map::MapView view = map_.view();
   if (config_.cull_keyframes) stats.culled_keyframes = cull_keyframes(view, kid);
-  if (kid > config_.purge_after_keyframes)
-    stats.purged_records = view.purge_bad(kid - config_.purge_after_keyframes);
+  if (kid.value() > config_.purge_after_keyframes)
+    stats.purged_records = view.purge_bad(map::KeyframeId{kid.value() - config_.purge_after_keyframes});
   return stats;
 }
 
@@ -85,7 +85,7 @@ int LocalMapper::cull_recent_points(map::MapView& view, map::KeyframeId kid) {
     map::MapPoint* p = view.point(pid);
     if (p == nullptr || p->bad) continue;
     // Keyframe ids grow by one per keyframe, so the id gap counts keyframes since the point's birth.
-    const auto age = kid - p->first_keyframe;
+    const auto age = kid.value() - p->first_keyframe.value();
     // Two keyframes after its birth a point must have been seen again: weighted observations count a
     // view with depth twice, so 3 = its own depth view plus one more, or three views without depth.
     if (p->found_ratio() < config_.min_found_ratio ||
@@ -232,15 +232,15 @@ bool LocalMapper::local_bundle_adjustment(map::KeyframeId kid, const std::atomic
     std::sort(sorted_points.begin(), sorted_points.end());  // deterministic problem order
     for (map::PointId pid : sorted_points) {
       const map::MapPoint* p = view.point(pid);
-      problem.points.push_back({pid, p->position});
+      problem.points.push_back({pid.value(), p->position});
       for (const auto& [k, feature] : p->observations) {
         const map::Keyframe* kf = view.keyframe(k);
         if (kf == nullptr || kf->bad) continue;
         if (!local.contains(k)) fixed.insert(k);
         const auto& kp = kf->features.keypoints[static_cast<std::size_t>(feature)];
         opt::BAObservation o;
-        o.keyframe_id = k;
-        o.point_id = pid;
+        o.keyframe_id = k.value();
+        o.point_id = pid.value();
         o.uv = {kp.pt.x, kp.pt.y};
         o.u_right = kf->features.u_right[static_cast<std::size_t>(feature)];
         o.inv_sigma2 = pyramid_.inv_level_sigma2[static_cast<std::size_t>(kp.octave)];
@@ -254,7 +254,7 @@ bool LocalMapper::local_bundle_adjustment(map::KeyframeId kid, const std::atomic
     const map::KeyframeId root = view.map_root(view.keyframe(kid)->map_id);
     for (map::KeyframeId k : kf_ids) {
       // The first keyframe anchors the gauge.
-      problem.keyframes.push_back({k, view.keyframe(k)->T_cw, fixed.contains(k) || k == root});
+      problem.keyframes.push_back({k.value(), view.keyframe(k)->T_cw, fixed.contains(k) || k == root});
     }
   }
   if (problem.keyframes.size() < 2) return false;
@@ -271,17 +271,19 @@ bool LocalMapper::local_bundle_adjustment(map::KeyframeId kid, const std::atomic
   for (std::size_t i = 0; i < problem.observations.size(); ++i) {
     if (!result.outlier[i]) continue;
     const auto& o = problem.observations[i];
-    view.erase_observation(o.point_id, o.keyframe_id);
+    view.erase_observation(map::PointId{o.point_id}, map::KeyframeId{o.keyframe_id});
   }
   for (const auto& k : problem.keyframes) {
     if (k.fixed) continue;
-    if (map::Keyframe* kf = view.keyframe(k.id); kf != nullptr && !kf->bad) kf->T_cw = k.T_cw;
+    if (map::Keyframe* kf = view.keyframe(map::KeyframeId{k.id}); kf != nullptr && !kf->bad)
+      kf->T_cw = k.T_cw;
   }
   for (const auto& p : problem.points) {
-    map::MapPoint* mp = view.point(p.id);
+    const map::PointId pid{p.id};
+    map::MapPoint* mp = view.point(pid);
     if (mp == nullptr || mp->bad) continue;
     mp->position = p.p_w;
-    view.update_point_normal_and_depth(p.id, pyramid_);
+    view.update_point_normal_and_depth(pid, pyramid_);
   }
   return true;
 }

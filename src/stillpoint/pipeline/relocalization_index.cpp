@@ -11,14 +11,14 @@ loop::BowVector RelocalizationIndex::describe(const cv::Mat& descriptors) const 
 
 void RelocalizationIndex::add(map::KeyframeId id, const loop::BowVector& bow) {
   std::lock_guard lock(mutex_);
-  db_.add(id, bow);
+  db_.add(id.value(), bow);
   if (filed_.insert(id).second) ++stats_.filed;
 }
 
 void RelocalizationIndex::erase(map::KeyframeId id) {
   std::lock_guard lock(mutex_);
   if (filed_.erase(id) == 0) return;
-  db_.erase(id);
+  db_.erase(id.value());
   ++stats_.erased;
 }
 
@@ -31,7 +31,7 @@ std::vector<map::KeyframeId> RelocalizationIndex::erase_culled(map::MapView& vie
   }
   for (map::KeyframeId id : culled) {
     filed_.erase(id);
-    db_.erase(id);
+    db_.erase(id.value());
   }
   stats_.erased += culled.size();
   return culled;
@@ -43,9 +43,11 @@ std::vector<map::KeyframeId> RelocalizationIndex::candidates(
   const loop::BowVector bow = describe(descriptors);
   std::lock_guard lock(mutex_);
   ++stats_.queries;
-  const auto hits = db_.query(bow, 0.8, exclude);
+  std::function<bool(loop::EntryId)> exclude_entry;
+  if (exclude) exclude_entry = [&exclude](loop::EntryId id) { return exclude(map::KeyframeId{id}); };
+  const auto hits = db_.query(bow, 0.8, exclude_entry);
   std::vector<map::KeyframeId> out;
-  for (std::size_t i = 0; i < hits.size() && i < n; ++i) out.push_back(hits[i].id);
+  for (std::size_t i = 0; i < hits.size() && i < n; ++i) out.emplace_back(hits[i].id);
   return out;
 }
 

@@ -74,7 +74,8 @@ class LocalMapSnapshot {
 
   std::vector<Point> points_;
   std::vector<int> anchor_features_;  // points_.size() x anchors_.size(), row per point
-  IdIndex index_;  // id (asked or live) -> slot in points_; rebuilt every frame, allocation-free
+  BasicIdIndex<map::PointId>
+      index_;  // id (asked or live) -> slot in points_; rebuilt every frame, allocation-free
   static constexpr std::size_t kGone = static_cast<std::size_t>(-1);
   std::vector<std::pair<map::PointId, std::size_t>> unindexed_;  // copy_points(): (id asked, slot or kGone)
   std::vector<map::KeyframeId> anchors_;

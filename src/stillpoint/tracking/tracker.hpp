@@ -221,7 +221,8 @@ class Tracker {
   std::vector<map::PointId> local_points_;
   std::vector<map::PointId> local_slots_;  // the local keyframes' point slots, in keyframe order
   bool local_slots_fresh_ = false;         // update_local_map() refilled them since the last collect
-  IdIndex seen_;  // collect_local_points()' scratch (point id -> unused), kept for its slots
+  BasicIdIndex<map::PointId>
+      seen_;  // collect_local_points()' scratch (point id -> unused), kept for its slots
   std::unordered_map<map::KeyframeId, int> keyframe_counts_;  // update_local_map()'s scratch, idem
   std::size_t lost_frames_ = 0;
   std::string why_lost_;  // the failed step and its counts, for the log when tracking is lost
