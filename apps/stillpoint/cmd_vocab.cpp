@@ -77,7 +77,7 @@ void evaluate_loops(const std::filesystem::path& seq, const std::filesystem::pat
     cv::Mat desc;
     orb.extract(gray, kps, desc);
     sp::loop::KeyframeInfo kf;
-    kf.id = sp::loop::KeyframeId{kfs.size() + 1};  // ids start at 1 (0 is "none"); poses[id - 1]
+    kf.id = sp::loop::KeyframeId{kfs.size()};  // the keyframe's index: poses[id]
     kf.R_cw = it->second.q_wc.toRotationMatrix().transpose();
     sp::Stopwatch sw;
     kf.bow = vocab.transform(desc);
@@ -99,7 +99,7 @@ void evaluate_loops(const std::filesystem::path& seq, const std::filesystem::pat
       std::vector<sp::loop::KeyframeId> out;
       const auto n = id.value();
       for (std::uint64_t d = 1; d <= static_cast<std::uint64_t>(w); ++d) {
-        if (n > d) out.emplace_back(n - d);
+        if (n >= d) out.emplace_back(n - d);
         if (n + d <= newest.value()) out.emplace_back(n + d);
       }
       if (n_best > 0 && out.size() > static_cast<std::size_t>(n_best))
@@ -125,18 +125,18 @@ void evaluate_loops(const std::filesystem::path& seq, const std::filesystem::pat
       const auto cands = det->detect(kf, view);
       ms.push_back(sw.elapsed_ms());
       for (const auto& c : cands) {
-        const Pose& a = poses[c.query.value() - 1];
-        const Pose& b = poses[c.match.value() - 1];
+        const Pose& a = poses[c.query.value()];
+        const Pose& b = poses[c.match.value()];
         const bool ok = (a.t_wc - b.t_wc).norm() < 0.5 && a.q_wc.angularDistance(b.q_wc) < 0.5;
         (ok ? good : bad) += 1;
         spdlog::debug("{} candidate q {} m {} score {:.3f}: {:.2f} m, {:.2f} rad apart", method, c.query,
                       c.match, c.score, (a.t_wc - b.t_wc).norm(), a.q_wc.angularDistance(b.q_wc));
-        if (first == "none") first = std::to_string(kf.id.value() - 1);
+        if (first == "none") first = std::to_string(kf.id.value());
       }
     }
     for (const auto& c : det->finish(view)) {
-      const Pose& a = poses[c.query.value() - 1];
-      const Pose& b = poses[c.match.value() - 1];
+      const Pose& a = poses[c.query.value()];
+      const Pose& b = poses[c.match.value()];
       const bool ok = (a.t_wc - b.t_wc).norm() < 0.5 && a.q_wc.angularDistance(b.q_wc) < 0.5;
       (ok ? good : bad) += 1;
       spdlog::debug("{} final candidate q {} m {}: {:.2f} m apart", method, c.query, c.match,

@@ -92,7 +92,7 @@ MapPoint* MapView::point(PointId id) { return const_cast<MapPoint*>(MapReader::p
 MapPoint* MapView::live_point(PointId id) { return const_cast<MapPoint*>(MapReader::live_point(id)); }
 
 KeyframeId MapView::add_keyframe(Keyframe kf) {
-  kf.id = std::exchange(map_.next_keyframe_id_, KeyframeId{map_.next_keyframe_id_.value() + 1});
+  kf.id = std::exchange(map_.next_keyframe_id_, map_.next_keyframe_id_.next());
   if (kf.points.size() != kf.features.size()) kf.points.assign(kf.features.size(), kNoPoint);
   const KeyframeId id = kf.id;
   auto [it, inserted] = map_.keyframes_.emplace(id, std::move(kf));
@@ -116,7 +116,7 @@ KeyframeId MapView::add_keyframe(Keyframe kf) {
 }
 
 PointId MapView::add_point(MapPoint p) {
-  p.id = std::exchange(map_.next_point_id_, PointId{map_.next_point_id_.value() + 1});
+  p.id = std::exchange(map_.next_point_id_, map_.next_point_id_.next());
   const PointId id = p.id;
   map_.points_.emplace(id, std::move(p));
   return id;

@@ -449,8 +449,8 @@ MapContents snapshot_map(Map& map, const MapFileInfo& info) {
   }
   // The map's own counters, so ids are never reused after the loaded map grows again.
   const auto [next_kf, next_pt] = view.next_ids();
-  m.next_keyframe_id = std::max(next_kf, KeyframeId{max_kf.value() + 1});
-  m.next_point_id = std::max(next_pt, PointId{max_pt.value() + 1});
+  m.next_keyframe_id = std::max(next_kf, max_kf.next());
+  m.next_point_id = std::max(next_pt, max_pt.next());
   return m;
 }
 

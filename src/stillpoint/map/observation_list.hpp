@@ -35,7 +35,6 @@ class ObservationList {
   [[nodiscard]] std::size_t size() const { return entries_.size(); }
   [[nodiscard]] bool empty() const { return entries_.empty(); }
   void clear() { entries_.clear(); }
-  void reserve(std::size_t n) { entries_.reserve(n); }
 
   [[nodiscard]] iterator find(KeyframeId kf) {
     const auto it = lower_bound(kf);

@@ -20,6 +20,8 @@ class Id {
   constexpr Id() = default;
   constexpr explicit Id(Rep value) : value_(value) {}
   [[nodiscard]] constexpr Rep value() const { return value_; }
+  // The id the map hands out after this one (ids count up by one).
+  [[nodiscard]] constexpr Id next() const { return Id{value_ + 1}; }
   friend constexpr auto operator<=>(Id, Id) = default;
   friend std::ostream& operator<<(std::ostream& os, Id id) { return os << id.value(); }  // test messages
 
