@@ -29,12 +29,13 @@ mkdir -p "$out"
 for s in $seqs; do
   n="$(basename "$s")"
   for r in $(seq 1 "$flat_reps"); do
-    "$bin" run --dataset "$s" --config "$config" --out "$out/${n}__ours_flat__$r" --no-progress > /dev/null 2>&1 || true
+    "$bin" run --dataset "$s" --config "$config" --out "$out/${n}__ours_flat__$r" --no-progress \
+      > "$out/${n}__ours_flat__$r.log" 2>&1 || true
     NGD_NO_PACE=1 NICE=0 "$ngd" "$s" "$out/${n}__ngd_flat__$r.txt" > "$out/${n}__ngd_flat__$r.out" 2>&1 || true
   done
   for r in $(seq 1 "$rt_reps"); do
     "$bin" run --dataset "$s" --config "$config" --realtime --out "$out/${n}__ours_realtime__$r" --no-progress \
-      > /dev/null 2>&1 || true
+      > "$out/${n}__ours_realtime__$r.log" 2>&1 || true
     NICE=0 "$ngd" "$s" "$out/${n}__ngd_realtime__$r.txt" > "$out/${n}__ngd_realtime__$r.out" 2>&1 || true
   done
 done

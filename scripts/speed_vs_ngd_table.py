@@ -16,12 +16,18 @@ out = sys.argv[1]
 binary = sys.argv[2] if len(sys.argv) > 2 else os.path.join(os.path.dirname(__file__), "..", "build", "apps",
                                                              "stillpoint", "stillpoint")
 runs = {}  # (sequence, system, mode) -> list of (ate_cm, fps, trk_ms, lost)
+stopped = []  # our runs that did not complete, with the reason stats.json gives
 for d in glob.glob(os.path.join(out, "*__ours_*__*")):
+    if not os.path.isdir(d):
+        continue  # the run's log
+
     seq, kind, _ = os.path.basename(d).split("__")
     try:
         j = json.load(open(os.path.join(d, "stats.json")))
     except (OSError, ValueError):
         continue
+    if not j.get("completed", True):
+        stopped.append((os.path.basename(d), j.get("stop_reason", "no reason recorded")))
     runs.setdefault((seq, "ours", kind[5:]), []).append(
         (j["eval"]["ate"]["rmse"] * 100, j["fps"], j["stages_ms"]["frame"]["median_ms"], j["lost_frames"],
          j["dataset"]))
@@ -87,3 +93,5 @@ for mode in ("flat", "realtime"):
     ate_ok = sum(r["ours"]["ate_cm"] <= r["ngd"]["ate_cm"] for r in rows)
     print(f"\n{mode}: ours FPS >= NGD on {fps_ok}/{len(rows)}; ours tracking median <= NGD on {trk_ok}/{len(rows)}; "
           f"ours ATE <= NGD on {ate_ok}/{len(rows)}")
+for name, why in sorted(stopped):
+    print(f"stopped early: {name}: {why}")

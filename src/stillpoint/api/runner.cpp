@@ -86,6 +86,8 @@ void write_outputs(stillpoint::System& system, const RunOptions& options, const 
         result.stats["unmerged_maps"].dump());
   }
   result.stats["completed"] = result.completed;
+  // A batch script that discards the log still learns why a run stopped early.
+  if (!result.stop_reason.empty()) result.stats["stop_reason"] = result.stop_reason;
   for (const auto& [k, v] : options.extra_stats.items()) result.stats[k] = v;
   for (const auto& [k, v] : run_stats.items()) result.stats[k] = v;
   try {
@@ -139,6 +141,7 @@ RunResult run_slam(io::FrameSource& source, const pipeline::SystemConfig& config
       if (options.stop != nullptr && options.stop->load()) {
         spdlog::warn("stop requested: finishing and writing the trajectory so far");
         interrupted = true;
+        result.stop_reason = "stop requested";
         break;
       }
       Stopwatch load;
@@ -160,7 +163,7 @@ RunResult run_slam(io::FrameSource& source, const pipeline::SystemConfig& config
       if (options.rss_every_frames != 0 && done % options.rss_every_frames == 0) {
         rss_timeline.push_back({done, current_rss_mib()});
       }
-      if (slam.failed()) throw Error("a pipeline stage failed (see the log)");
+      if (slam.failed()) throw Error("a pipeline stage failed: " + slam.failure());
       const double fps = static_cast<double>(done) / std::max(1e-9, wall.elapsed_ms() / 1000.0);
       bar.update(done, fmt::format("{:.1f} fps, {} lost", fps, lost));
     }
@@ -168,6 +171,7 @@ RunResult run_slam(io::FrameSource& source, const pipeline::SystemConfig& config
   } catch (const std::exception& e) {
     spdlog::error("run stopped at frame {}: {}", done, e.what());
     result.completed = false;
+    result.stop_reason = fmt::format("stopped at frame {}: {}", done, e.what());
   }
   bar.finish();
   system.shutdown();
@@ -186,6 +190,7 @@ RunResult run_slam(io::FrameSource& source, const pipeline::SystemConfig& config
     } catch (const std::exception& e) {
       spdlog::error("map not saved: {}", e.what());
       result.completed = false;
+      if (result.stop_reason.empty()) result.stop_reason = std::string("map not saved: ") + e.what();
     }
   }
   const double seconds = wall.elapsed_ms() / 1000.0;

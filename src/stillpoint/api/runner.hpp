@@ -8,6 +8,7 @@
 #include <functional>
 #include <nlohmann/json.hpp>
 #include <optional>
+#include <string>
 
 #include "stillpoint/io/frame_source.hpp"
 #include "stillpoint/pipeline/system_config.hpp"
@@ -48,7 +49,8 @@ struct RunOptions {
 
 struct RunResult {
   nlohmann::json stats;
-  bool completed = false;  // false when stopped early or a stage failed
+  bool completed = false;   // false when stopped early or a stage failed
+  std::string stop_reason;  // why it stopped early (the error, or "stop requested"); empty when completed
   std::optional<double> ate_rmse;
 };
 

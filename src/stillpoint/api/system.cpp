@@ -253,7 +253,7 @@ TrackResult System::track(const cv::Mat& color, const cv::Mat& depth, double tim
   impl_->last_stamp = timestamp;
 
   TrackResult out = impl_->track(frame);
-  if (impl_->system->failed()) throw Error("a StillPoint pipeline stage failed (see the log)");
+  if (impl_->system->failed()) throw Error("a StillPoint pipeline stage failed: " + impl_->system->failure());
   return out;
 }
 

@@ -301,6 +301,12 @@ map::MapSaveResult SlamSystem::save_map(const std::filesystem::path& file) {
 
 bool SlamSystem::failed() const { return mapping_stage_->failed() || (loop_stage_ && loop_stage_->failed()); }
 
+std::string SlamSystem::failure() const {
+  if (mapping_stage_->failed()) return mapping_stage_->failure();
+  if (loop_stage_ && loop_stage_->failed()) return loop_stage_->failure();
+  return {};
+}
+
 FrameReport SlamSystem::process(const io::FrameData& data) {
   Stopwatch frame_watch;
   culling_.submit(data);  // detection overlaps feature extraction

@@ -84,6 +84,8 @@ class SlamSystem {
   nlohmann::json write_artifacts();
   [[nodiscard]] StageTimes& times() { return times_; }
   [[nodiscard]] bool failed() const;
+  // The failed stage and its error (empty while none failed).
+  [[nodiscard]] std::string failure() const;
 
  private:
   // The BoW relocalisation database over every keyframe (when a vocabulary is available): filled as

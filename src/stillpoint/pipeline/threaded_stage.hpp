@@ -5,6 +5,7 @@
 
 #include <atomic>
 #include <functional>
+#include <mutex>
 #include <string>
 #include <thread>
 
@@ -53,6 +54,11 @@ class ThreadedStage {
   [[nodiscard]] const std::string& name() const { return name_; }
   // Set when the stage failed; the pipeline reports it and stops.
   [[nodiscard]] bool failed() const { return failed_.load(); }
+  // The first failure, "<stage> stage: <error>"; empty while none.
+  [[nodiscard]] std::string failure() const {
+    std::lock_guard lock(failure_mutex_);
+    return failure_;
+  }
 
  protected:
   virtual void process(In item) = 0;
@@ -66,6 +72,10 @@ class ThreadedStage {
       process(std::move(item));
     } catch (const std::exception& e) {
       spdlog::error("{} stage failed: {}", name_, e.what());
+      {
+        std::lock_guard lock(failure_mutex_);
+        if (failure_.empty()) failure_ = name_ + " stage: " + e.what();
+      }
       failed_ = true;
     }
     --pending_;
@@ -76,6 +86,8 @@ class ThreadedStage {
   std::thread thread_;
   std::atomic<std::size_t> pending_{0};  // queued + running
   std::atomic<bool> failed_{false};
+  mutable std::mutex failure_mutex_;
+  std::string failure_;
 };
 
 }  // namespace sp::pipeline
