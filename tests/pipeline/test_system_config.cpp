@@ -88,6 +88,31 @@ TEST(DynamicCulling, ModelPathResolvesAgainstTheProjectRoot) {
   EXPECT_TRUE(flow.model_file().empty());
 }
 
+// dynamic.detector_min_score replaces the model's own score threshold (0 keeps it) and is range-checked;
+// a `detector` section keeps its own conf_threshold.
+TEST(DynamicCulling, DetectorMinScoreReplacesTheModelsThreshold) {
+  const geo::CameraIntrinsics camera;
+  const std::filesystem::path root(SP_SOURCE_DIR);
+  DynamicConfig config =
+      load_text("dynamic:\n  mode: detector+flow\n  model: models/yolox_nano/yolox_nano.onnx\n").dynamic;
+  EXPECT_EQ(config.detector_min_score, 0.0);
+  const float model_own = dyn::DetectorConfig::for_model((root / config.model).string()).conf_threshold;
+  {
+    const DynamicCulling culling(config, camera, true, std::nullopt, root);
+    EXPECT_FLOAT_EQ(culling.detector_config().conf_threshold, model_own);
+  }
+  config = load_text(
+               "dynamic:\n  mode: detector+flow\n  model: models/yolox_nano/yolox_nano.onnx\n"
+               "  detector_min_score: 0.2\n")
+               .dynamic;
+  {
+    const DynamicCulling culling(config, camera, true, std::nullopt, root);
+    EXPECT_FLOAT_EQ(culling.detector_config().conf_threshold, 0.2f);
+    EXPECT_NE(model_own, 0.2f);
+  }
+  EXPECT_THROW((void)load_text("dynamic:\n  detector_min_score: 1.5\n"), ConfigError);
+}
+
 // README: "every key documented". A line that sets a value (`key: value`) must carry a `#` comment
 // (unit and range, see docs/CONVENTIONS.md); section headers (`key:` alone) need none.
 TEST(SystemConfig, EveryKeyOfTheShippedFileHasAComment) {

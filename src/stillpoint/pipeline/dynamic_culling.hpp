@@ -27,6 +27,9 @@ struct DynamicConfig {
   // 320 halves the detector's cost with the same culling recall on the tune rooms (docs/dynamic.md):
   // people indoors are large, so the lost resolution costs nothing and the detector keeps up.
   int detector_input = 320;
+  // Detections scoring below this are dropped (0 = the model's own conf_threshold). Applies to the
+  // model's defaults only; a `detector` section sets its own conf_threshold.
+  double detector_min_score = 0.0;
   // Scheduling niceness of the detector thread (0 = as tracking). 2 keeps tracking within +5 ms of
   // culling-off on 2 cores; 5 and more starve the detector and stale boxes cost accuracy (docs/dynamic.md).
   int detector_nice = 2;
@@ -86,6 +89,8 @@ class DynamicCulling {
   [[nodiscard]] const std::string& mode() const { return mode_; }
   // The detector model file in use (resolved path); empty when no detector runs.
   [[nodiscard]] const std::filesystem::path& model_file() const { return model_file_; }
+  // The detector's settings as used (model defaults with the dynamic.detector_* keys applied).
+  [[nodiscard]] const dyn::DetectorConfig& detector_config() const { return detector_config_; }
   // Starts detection of a frame early (right after decoding) so it overlaps feature extraction.
   void submit(const io::FrameData& data);
   CullingOutput process(const io::FrameData& data, const cv::Mat& gray,
@@ -100,6 +105,7 @@ class DynamicCulling {
   double stale_wait_ms_;
   Eigen::Matrix3d K_;
   std::filesystem::path model_file_;
+  dyn::DetectorConfig detector_config_;
   std::unique_ptr<dyn::AsyncDetector> detector_;
   std::optional<dyn::OracleDetections> oracle_;
   std::unique_ptr<dyn::DynamicFeatureFilter> filter_;
