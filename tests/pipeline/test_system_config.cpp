@@ -88,28 +88,22 @@ TEST(DynamicCulling, ModelPathResolvesAgainstTheProjectRoot) {
   EXPECT_TRUE(flow.model_file().empty());
 }
 
-// dynamic.detector_min_score replaces the model's own score threshold (0 keeps it) and is range-checked;
-// a `detector` section keeps its own conf_threshold.
+// dynamic.detector_min_score replaces the model's own score threshold (0 keeps the model's; the
+// default is lower than the shipped models' 0.35) and is range-checked.
 TEST(DynamicCulling, DetectorMinScoreReplacesTheModelsThreshold) {
   const geo::CameraIntrinsics camera;
   const std::filesystem::path root(SP_SOURCE_DIR);
-  DynamicConfig config =
-      load_text("dynamic:\n  mode: detector+flow\n  model: models/yolox_nano/yolox_nano.onnx\n").dynamic;
-  EXPECT_EQ(config.detector_min_score, 0.0);
-  const float model_own = dyn::DetectorConfig::for_model((root / config.model).string()).conf_threshold;
-  {
-    const DynamicCulling culling(config, camera, true, std::nullopt, root);
-    EXPECT_FLOAT_EQ(culling.detector_config().conf_threshold, model_own);
-  }
-  config = load_text(
-               "dynamic:\n  mode: detector+flow\n  model: models/yolox_nano/yolox_nano.onnx\n"
-               "  detector_min_score: 0.2\n")
-               .dynamic;
-  {
-    const DynamicCulling culling(config, camera, true, std::nullopt, root);
-    EXPECT_FLOAT_EQ(culling.detector_config().conf_threshold, 0.2f);
-    EXPECT_NE(model_own, 0.2f);
-  }
+  const std::string base = "dynamic:\n  mode: detector+flow\n  model: models/yolox_nano/yolox_nano.onnx\n";
+  const float model_own =
+      dyn::DetectorConfig::for_model((root / "models/yolox_nano/yolox_nano.onnx").string()).conf_threshold;
+  const auto used_threshold = [&](const std::string& extra) {
+    const DynamicCulling culling(load_text(base + extra).dynamic, camera, true, std::nullopt, root);
+    return culling.detector_config().conf_threshold;
+  };
+  EXPECT_FLOAT_EQ(used_threshold(""), static_cast<float>(DynamicConfig{}.detector_min_score));
+  EXPECT_LT(DynamicConfig{}.detector_min_score, model_own);
+  EXPECT_FLOAT_EQ(used_threshold("  detector_min_score: 0\n"), model_own);
+  EXPECT_FLOAT_EQ(used_threshold("  detector_min_score: 0.2\n"), 0.2f);
   EXPECT_THROW((void)load_text("dynamic:\n  detector_min_score: 1.5\n"), ConfigError);
 }
 
