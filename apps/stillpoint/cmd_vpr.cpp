@@ -68,8 +68,8 @@ int to_int(const std::string& text, const std::string& what) {
   return v;
 }
 
-// Flags win; otherwise the variables torchrun sets (WORLD_SIZE, RANK, MASTER_ADDR, MASTER_PORT), so
-// `torchrun --no-python stillpoint vpr train ...` works; otherwise a single process.
+// Flags win; otherwise the variables torchrun sets (WORLD_SIZE, RANK, MASTER_ADDR, MASTER_PORT), so a
+// launcher that exports them per process needs no flags; otherwise a single process.
 void resolve_distributed(TrainArgs& a) {
   auto& o = a.o;
   const auto ws = env("WORLD_SIZE"), rk = env("RANK");
