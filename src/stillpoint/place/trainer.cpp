@@ -134,21 +134,26 @@ Mining build_mining(const std::vector<PlaceImage>& imgs, const PlaceRules& rules
   return m;
 }
 
-// All parameters and buffers of `model` replaced by rank 0's (one flat broadcast).
-void broadcast_weights(ParCNetVLAD& model, ProcessGroup& pg) {
-  if (pg.size() == 1) return;
+// Replaces every parameter and buffer by rank 0's (one flat broadcast). Returns the largest change that
+// made here: 0 on rank 0, and on the others as long as they step in lockstep.
+double broadcast_weights(ParCNetVLAD& model, ProcessGroup& pg, const char* what) {
+  if (pg.size() == 1) return 0.0;
   torch::NoGradGuard g;
   std::vector<torch::Tensor> ts = model->parameters();
   for (const auto& b : model->buffers()) ts.push_back(b);
   std::vector<torch::Tensor> flat;
   for (const auto& t : ts) flat.push_back(t.reshape({-1}));
   auto all = torch::cat(flat);
-  pg.broadcast(all, 0, "the initial weight broadcast");
+  pg.broadcast(all, 0, what);
+  double change = 0;
   int64_t at = 0;
   for (auto& t : ts) {
-    t.copy_(all.narrow(0, at, t.numel()).view(t.sizes()));
+    const auto mine = all.narrow(0, at, t.numel()).view(t.sizes());
+    change = std::max(change, (mine - t).abs().max().item<double>());
+    t.copy_(mine);
     at += t.numel();
   }
+  return change;
 }
 
 // Ranks that disagree on data or options would silently train different things (or deadlock on a
@@ -205,7 +210,7 @@ std::vector<EpochStats> train_model(const TrainOptions& o) {
   const auto store = load_images(imgs, model->cfg.input_height, model->cfg.input_width, progress);
   if (o.resume.empty() && lead) init_centroids(model, store, o.kmeans_images, rng);
   // Every rank starts from rank 0's weights (random init and k-means centroids alike).
-  broadcast_weights(model, pg);
+  broadcast_weights(model, pg, "the initial weight broadcast");
 
   std::unique_ptr<torch::optim::Optimizer> opt;
   if (o.optimizer == "sgd") {
@@ -349,6 +354,12 @@ std::vector<EpochStats> train_model(const TrainOptions& o) {
       bar.update(std::min(order.size(), b + step_queries), fmt::format("loss {:.4f}", loss_sum / steps));
     }
     bar.finish();
+    // Identical gradients keep the ranks identical only while every rank rounds alike; machines with
+    // different CPUs (vector widths) may not. Re-sync to rank 0 each epoch and say if anything moved.
+    es.rank_drift = broadcast_weights(model, pg, "the end-of-epoch weight sync");
+    if (es.rank_drift > 0)
+      spdlog::warn("rank {}: weights had drifted from rank 0's by up to {:.3g}; re-synchronised", pg.rank(),
+                   es.rank_drift);
     es.loss = steps > 0 ? loss_sum / steps : 0.0;
     es.active = pairs > 0 ? active / pairs : 0.0;
     es.seconds = sw.elapsed_ms() / 1000.0;

@@ -47,6 +47,7 @@ struct EpochStats {
   double loss = 0;    // mean triplet loss
   double active = 0;  // fraction of (query, negative) pairs inside the margin
   double seconds = 0;
+  double rank_drift = 0;  // largest |weight − rank 0's| before the end-of-epoch sync (0: lockstep)
 };
 
 // Trains (or resumes) and writes the final model to options.out. Returns per-epoch statistics.
