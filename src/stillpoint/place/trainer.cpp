@@ -330,7 +330,7 @@ std::vector<EpochStats> train_model(const TrainOptions& o) {
           std::vector<torch::Tensor> flat;
           for (const auto& p : params)
             flat.push_back(p.grad().defined() ? p.grad().reshape({-1}) : torch::zeros({p.numel()}));
-          flat.push_back(torch::tensor(std::vector<float>(local, local + 4)));  // exact: small integers
+          flat.push_back(torch::tensor(std::vector<float>(local, local + 4)));  // counts stay exact
           auto buf = torch::cat(flat);
           pg.all_reduce(buf, ProcessGroup::Op::Sum, "the gradient all-reduce");
           const auto counters = buf.narrow(0, buf.size(0) - 4, 4);
