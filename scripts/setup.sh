@@ -5,6 +5,7 @@ PACKAGES=(
   build-essential cmake ninja-build pkg-config
   libopencv-dev libeigen3-dev libceres-dev libtorch-dev
   libyaml-cpp-dev libspdlog-dev libfmt-dev libcli11-dev nlohmann-json3-dev
+  libgloo-dev  # gloo headers for libtorch's c10d ProcessGroupGloo (data-parallel vpr train)
   libgtest-dev libgmock-dev libbenchmark-dev libopenni2-dev
   libjpeg-dev  # colour JPEGs decoded straight to BGR (src/stillpoint/io/jpeg_reader.cpp)
   chromium nodejs  # report: headless-browser test; npm fetches three.js at build time

@@ -1,9 +1,11 @@
 // `stillpoint vpr`: train and evaluate the ParC_NetVLAD place descriptor, and the BoW baseline.
 #include <spdlog/spdlog.h>
 
+#include <cstdlib>
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
+#include <optional>
 
 #include "commands.hpp"
 #include "stillpoint/common/error.hpp"
@@ -26,6 +28,8 @@ struct TrainArgs {
   std::string variant = "small", parc = "on", cbam = "on", config;
   double width_mult = 0, depth_mult = 0;
   int input_h = 0, input_w = 0, clusters = 0;
+  int world_size = 0, rank = -1;  // unset (0, -1): torchrun's WORLD_SIZE / RANK, else one process
+  std::string master;             // HOST:PORT; empty: MASTER_ADDR / MASTER_PORT
 };
 
 struct EvalArgs {
@@ -47,8 +51,54 @@ cv::Mat read_image(const fs::path& p) {
   return im;
 }
 
+std::optional<std::string> env(const char* name) {
+  const char* v = std::getenv(name);
+  return v && *v ? std::optional<std::string>(v) : std::nullopt;
+}
+
+int to_int(const std::string& text, const std::string& what) {
+  size_t used = 0;
+  int v = 0;
+  try {
+    v = std::stoi(text, &used);
+  } catch (const std::exception&) {
+    used = 0;
+  }
+  if (used == 0 || used != text.size()) throw sp::Error(what + " must be an integer, not '" + text + "'");
+  return v;
+}
+
+// Flags win; otherwise the variables torchrun sets (WORLD_SIZE, RANK, MASTER_ADDR, MASTER_PORT), so a
+// launcher that exports them per process needs no flags; otherwise a single process.
+void resolve_distributed(TrainArgs& a) {
+  auto& o = a.o;
+  const auto ws = env("WORLD_SIZE"), rk = env("RANK");
+  o.world_size = a.world_size > 0 ? a.world_size : ws ? to_int(*ws, "WORLD_SIZE") : 1;
+  o.rank = a.rank >= 0 ? a.rank : rk ? to_int(*rk, "RANK") : 0;
+  if (!a.master.empty()) {
+    const auto colon = a.master.rfind(':');
+    if (colon == std::string::npos || colon == 0)
+      throw sp::Error("--master must be HOST:PORT (rank 0's address), not '" + a.master + "'");
+    o.master_addr = a.master.substr(0, colon);
+    if (o.master_addr.size() > 2 && o.master_addr.front() == '[' && o.master_addr.back() == ']')
+      o.master_addr = o.master_addr.substr(1, o.master_addr.size() - 2);  // [IPv6]:port
+    o.master_port = to_int(a.master.substr(colon + 1), "the port of --master");
+  } else if (o.world_size > 1) {
+    const auto addr = env("MASTER_ADDR"), port = env("MASTER_PORT");
+    if (!addr || !port)
+      throw sp::Error(
+          "a world size above 1 needs rank 0's address: --master HOST:PORT, or MASTER_ADDR and "
+          "MASTER_PORT in the environment");
+    o.master_addr = *addr;
+    o.master_port = to_int(*port, "MASTER_PORT");
+  }
+  if (o.world_size > 1 && o.rank == 0 && !o.resume.empty())
+    spdlog::info("resuming on every rank: each needs {} and its .epoch/.optim files", o.resume.string());
+}
+
 void run_train(TrainArgs& a) {
   auto& o = a.o;
+  resolve_distributed(a);
   o.model = a.variant == "tiny" ? sp::place::ModelConfig::tiny() : sp::place::ModelConfig::small();
   if (!a.config.empty()) {
     const auto r = sp::ConfigReader::from_file(a.config);
@@ -65,6 +115,7 @@ void run_train(TrainArgs& a) {
   o.model.parc = a.parc == "on";
   o.model.cbam = a.cbam == "on";
   const auto stats = sp::place::train_model(o);
+  if (o.rank != 0) return;  // rank 0 writes the files
   nlohmann::json j = nlohmann::json::array();
   for (const auto& s : stats) {
     j.push_back({{"epoch", s.epoch}, {"loss", s.loss}, {"active", s.active}, {"seconds", s.seconds}});
@@ -204,6 +255,19 @@ void add_vpr_command(CLI::App& app) {
   train->add_option("--resume", ta->o.resume, "checkpoint (<out>.ckpt) to continue from");
   train->add_option("--threads", ta->o.threads)->check(CLI::Range(1, 2))->capture_default_str();
   train->add_flag("!--no-progress", ta->o.progress, "no progress bar");
+  train
+      ->add_option("--world-size", ta->world_size,
+                   "processes training together (default: $WORLD_SIZE, else 1)")
+      ->check(CLI::Range(1, 4096));
+  train->add_option("--rank", ta->rank, "this process's rank, 0 to world size - 1 (default: $RANK, else 0)")
+      ->check(CLI::Range(0, 4095));
+  train->add_option("--master", ta->master,
+                    "HOST:PORT where rank 0 listens (default: $MASTER_ADDR:$MASTER_PORT)");
+  train
+      ->add_option("--dist-timeout", ta->o.dist_timeout_s,
+                   "seconds before a silent (dead or stalled) rank fails the others")
+      ->check(CLI::Range(1.0, 86400.0))
+      ->capture_default_str();
   train->callback([ta] { run_train(*ta); });
 
   auto ea = std::make_shared<EvalArgs>();

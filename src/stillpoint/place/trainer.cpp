@@ -13,6 +13,7 @@
 #include "stillpoint/common/error.hpp"
 #include "stillpoint/common/progress_bar.hpp"
 #include "stillpoint/common/timing.hpp"
+#include "stillpoint/place/distributed.hpp"
 #include "stillpoint/place/model.hpp"
 
 namespace sp::place {
@@ -62,15 +63,22 @@ torch::Tensor load_images(const std::vector<PlaceImage>& imgs, int h, int w, boo
   return store;
 }
 
-torch::Tensor describe_all(ParCNetVLAD& model, const torch::Tensor& store, int batch) {
+// Descriptors of every image, in chunks of `batch` rows; the ranks share the chunks round-robin and
+// sum their zero-padded parts, so every rank ends with the same cache a single process would compute.
+torch::Tensor describe_all(ParCNetVLAD& model, const torch::Tensor& store, int batch, ProcessGroup& pg) {
   torch::NoGradGuard guard;
   model->eval();
-  std::vector<torch::Tensor> out;
-  for (int64_t i = 0; i < store.size(0); i += batch) {
+  torch::Tensor out;
+  for (int64_t i = 0, chunk = 0; i < store.size(0); i += batch, ++chunk) {
+    if (chunk % pg.size() != pg.rank()) continue;
     const int64_t n = std::min<int64_t>(batch, store.size(0) - i);
-    out.push_back(model->forward(normalise(store.narrow(0, i, n))));
+    const auto d = model->forward(normalise(store.narrow(0, i, n)));
+    if (!out.defined()) out = torch::zeros({store.size(0), d.size(1)});
+    out.narrow(0, i, n).copy_(d);
   }
-  return torch::cat(out, 0);
+  if (!out.defined()) out = torch::zeros({store.size(0), model->cfg.descriptor_dim()});
+  pg.all_reduce(out, ProcessGroup::Op::Sum, "the descriptor-cache refresh");
+  return out;
 }
 
 // k-means on L2-normalised local features of a few images: NetVLAD's centroid initialisation.
@@ -126,16 +134,66 @@ Mining build_mining(const std::vector<PlaceImage>& imgs, const PlaceRules& rules
   return m;
 }
 
+// Replaces every parameter and buffer by rank 0's (one flat broadcast). Returns the largest change that
+// made here: 0 on rank 0, and on the others as long as they step in lockstep.
+double broadcast_weights(ParCNetVLAD& model, ProcessGroup& pg, const char* what) {
+  if (pg.size() == 1) return 0.0;
+  torch::NoGradGuard g;
+  std::vector<torch::Tensor> ts = model->parameters();
+  for (const auto& b : model->buffers()) ts.push_back(b);
+  std::vector<torch::Tensor> flat;
+  for (const auto& t : ts) flat.push_back(t.reshape({-1}));
+  auto all = torch::cat(flat);
+  pg.broadcast(all, 0, what);
+  double change = 0;
+  int64_t at = 0;
+  for (auto& t : ts) {
+    const auto mine = all.narrow(0, at, t.numel()).view(t.sizes());
+    change = std::max(change, (mine - t).abs().max().item<double>());
+    t.copy_(mine);
+    at += t.numel();
+  }
+  return change;
+}
+
+// Ranks that disagree on data or options would silently train different things (or deadlock on a
+// different step count): compare min and max of each value over the ranks and name the first mismatch.
+void check_same_on_all_ranks(ProcessGroup& pg, const std::vector<std::pair<const char*, double>>& values) {
+  if (pg.size() == 1) return;
+  auto t = torch::empty({2 * static_cast<int64_t>(values.size())}, torch::kFloat64);
+  for (size_t i = 0; i < values.size(); ++i) {
+    t[static_cast<int64_t>(2 * i)] = values[i].second;
+    t[static_cast<int64_t>(2 * i + 1)] = -values[i].second;
+  }
+  pg.all_reduce(t, ProcessGroup::Op::Max, "the start-up consistency check");
+  for (size_t i = 0; i < values.size(); ++i) {
+    const double hi = t[static_cast<int64_t>(2 * i)].item<double>();
+    const double lo = -t[static_cast<int64_t>(2 * i + 1)].item<double>();
+    if (hi != lo) {
+      throw sp::Error(
+          fmt::format("distributed training: the ranks disagree on {} (from {} to {}): every rank "
+                      "needs the same --data, training options and --resume checkpoint",
+                      values[i].first, lo, hi));
+    }
+  }
+}
+
 }  // namespace
 
 std::vector<EpochStats> train_model(const TrainOptions& o) {
+  const DistOptions dopt{o.world_size, o.rank, o.master_addr, o.master_port, o.dist_timeout_s};
+  validate(dopt);
   if (o.threads > 0) at::set_num_threads(o.threads);
+  // Rendezvous before the slow image loading, so a misconfigured rank fails at once.
+  ProcessGroup pg(dopt);
+  const bool lead = pg.rank() == 0;
+  const bool progress = o.progress && lead;
   torch::manual_seed(o.seed);
   std::mt19937_64 rng(o.seed);
   const auto imgs = collect_places(o.data);
   const auto mining = build_mining(imgs, o.rules);
   if (mining.queries.empty()) throw sp::Error("no training image has a positive: render more views per room");
-  spdlog::info("training: {} images, {} with positives", imgs.size(), mining.queries.size());
+  if (lead) spdlog::info("training: {} images, {} with positives", imgs.size(), mining.queries.size());
 
   ParCNetVLAD model{nullptr};
   int start_epoch = 0;
@@ -144,13 +202,15 @@ std::vector<EpochStats> train_model(const TrainOptions& o) {
     model = load_model(o.resume);
     std::ifstream st(o.resume.string() + ".epoch");
     if (!(st >> start_epoch)) throw sp::InputError(o.resume.string() + ".epoch", 1, "missing epoch count");
-    spdlog::info("resuming {} after epoch {}", o.resume.string(), start_epoch);
+    if (lead) spdlog::info("resuming {} after epoch {}", o.resume.string(), start_epoch);
   } else {
     model = ParCNetVLAD(o.model);
   }
-  spdlog::info("model: {}", model->cfg.summary());
-  const auto store = load_images(imgs, model->cfg.input_height, model->cfg.input_width, o.progress);
-  if (o.resume.empty()) init_centroids(model, store, o.kmeans_images, rng);
+  if (lead) spdlog::info("model: {}", model->cfg.summary());
+  const auto store = load_images(imgs, model->cfg.input_height, model->cfg.input_width, progress);
+  if (o.resume.empty() && lead) init_centroids(model, store, o.kmeans_images, rng);
+  // Every rank starts from rank 0's weights (random init and k-means centroids alike).
+  broadcast_weights(model, pg, "the initial weight broadcast");
 
   std::unique_ptr<torch::optim::Optimizer> opt;
   if (o.optimizer == "sgd") {
@@ -161,13 +221,34 @@ std::vector<EpochStats> train_model(const TrainOptions& o) {
   } else {
     throw sp::Error("optimizer must be adam or sgd, not " + o.optimizer);
   }
-  if (!o.resume.empty() && fs::exists(o.resume.string() + ".optim"))
+  bool optim_loaded = false;
+  if (!o.resume.empty() && fs::exists(o.resume.string() + ".optim")) {
     torch::load(*opt, o.resume.string() + ".optim");
+    optim_loaded = true;
+  }
+  const auto params = model->parameters();
+  int64_t n_params = 0;
+  for (const auto& p : params) n_params += p.numel();
+  check_same_on_all_ranks(pg, {{"the image count", static_cast<double>(imgs.size())},
+                               {"the query count", static_cast<double>(mining.queries.size())},
+                               {"the parameter count", static_cast<double>(n_params)},
+                               {"the resumed epoch", start_epoch},
+                               {"whether an optimiser state was resumed", optim_loaded ? 1.0 : 0.0},
+                               {"--epochs", o.epochs},
+                               {"--batch", o.batch},
+                               {"--queries-per-epoch", o.queries_per_epoch},
+                               {"--negatives", o.negatives},
+                               {"--refresh-every", o.refresh_every},
+                               {"--seed", static_cast<double>(o.seed)}});
 
+  // One step consumes `batch` queries on each rank: rank r takes [b + r·batch, b + (r+1)·batch).
+  const size_t step_queries = static_cast<size_t>(o.batch) * static_cast<size_t>(pg.size());
   std::vector<EpochStats> stats;
   for (int epoch = start_epoch + 1; epoch <= o.epochs; ++epoch) {
-    // Per-epoch seeds keep a resumed run identical to an uninterrupted one.
-    torch::manual_seed(o.seed * 1000 + static_cast<std::uint64_t>(epoch));
+    // Per-epoch seeds keep a resumed run identical to an uninterrupted one. The query order is the
+    // same on every rank; the torch RNG (stochastic depth) differs per rank so masks are independent.
+    torch::manual_seed(o.seed * 1000 + static_cast<std::uint64_t>(epoch) +
+                       1000003ULL * static_cast<std::uint64_t>(pg.rank()));
     std::mt19937_64 erng(o.seed * 1000 + static_cast<std::uint64_t>(epoch));
     sp::Stopwatch sw;
     std::vector<int> order = mining.queries;
@@ -175,19 +256,20 @@ std::vector<EpochStats> train_model(const TrainOptions& o) {
     order.resize(std::min<size_t>(order.size(), static_cast<size_t>(o.queries_per_epoch)));
     EpochStats es;
     es.epoch = epoch;
-    double loss_sum = 0, active = 0;
-    int steps = 0, pairs = 0;
+    double loss_sum = 0, active = 0, pairs = 0;
+    int steps = 0;
     torch::Tensor cache;
     std::uniform_int_distribution<int> pick(0, static_cast<int>(imgs.size()) - 1);
-    sp::ProgressBar bar(fmt::format("epoch {}/{}", epoch, o.epochs), order.size(), o.progress);
-    for (size_t b = 0; b < order.size(); b += static_cast<size_t>(o.batch)) {
-      if (b % static_cast<size_t>(std::max(o.refresh_every, 1)) < static_cast<size_t>(o.batch) ||
-          !cache.defined()) {
-        cache = describe_all(model, store, 32);
+    sp::ProgressBar bar(fmt::format("epoch {}/{}", epoch, o.epochs), order.size(), progress);
+    for (size_t b = 0; b < order.size(); b += step_queries) {
+      if (b % static_cast<size_t>(std::max(o.refresh_every, 1)) < step_queries || !cache.defined()) {
+        cache = describe_all(model, store, 32, pg);
       }
       std::vector<int64_t> q_idx, p_idx, n_idx;
-      const size_t end = std::min(order.size(), b + static_cast<size_t>(o.batch));
-      for (size_t i = b; i < end; ++i) {
+      const size_t begin =
+          std::min(order.size(), b + static_cast<size_t>(pg.rank()) * static_cast<size_t>(o.batch));
+      const size_t end = std::min(order.size(), begin + static_cast<size_t>(o.batch));
+      for (size_t i = begin; i < end; ++i) {
         const int q = order[i];
         const auto qd = cache[q];
         // Best positive: the closest in descriptor space (the view most likely to overlap).
@@ -197,11 +279,15 @@ std::vector<EpochStats> train_model(const TrainOptions& o) {
                 .pow(2)
                 .sum(1);
         const int best_pos = pos[static_cast<size_t>(pd.argmin().item<int64_t>())];
-        // Hard negatives: the closest of a random pool of true negatives.
+        // Hard negatives: the closest of a random pool of true negatives. The pool's RNG depends on
+        // the query's place in the epoch only, so how the step is split over ranks changes nothing.
+        std::seed_seq qseed{static_cast<std::uint32_t>(o.seed), static_cast<std::uint32_t>(o.seed >> 32),
+                            static_cast<std::uint32_t>(epoch), static_cast<std::uint32_t>(i)};
+        std::mt19937_64 qrng(qseed);
         std::vector<int64_t> pool;
         for (int tries = 0; static_cast<int>(pool.size()) < o.negative_pool && tries < 20 * o.negative_pool;
              ++tries) {
-          const int c = pick(erng);
+          const int c = pick(qrng);
           if (is_negative(imgs[static_cast<size_t>(q)], imgs[static_cast<size_t>(c)], o.rules))
             pool.push_back(c);
         }
@@ -214,40 +300,81 @@ std::vector<EpochStats> train_model(const TrainOptions& o) {
         for (int64_t k = 0; k < o.negatives; ++k)
           n_idx.push_back(pool[static_cast<size_t>(hard[k].item<int64_t>())]);
       }
-      if (q_idx.empty()) continue;
       model->train();
-      const auto all = torch::cat({torch::tensor(q_idx), torch::tensor(p_idx), torch::tensor(n_idx)});
-      const auto d = model->forward(normalise(store.index_select(0, all)));
-      const int64_t B = static_cast<int64_t>(q_idx.size());
-      const auto qd = d.narrow(0, 0, B), pd = d.narrow(0, B, B);
-      const auto nd = d.narrow(0, 2 * B, B * o.negatives).view({B, o.negatives, -1});
-      const auto loss = triplet_loss(qd, pd, nd, o.margin);
       opt->zero_grad();
-      loss.backward();
-      opt->step();
-      {
+      const int64_t B = static_cast<int64_t>(q_idx.size());
+      double local[4] = {static_cast<double>(B), 0, 0, 0};  // triplets, loss sum, active pairs, pairs
+      if (B > 0) {
+        const auto all = torch::cat({torch::tensor(q_idx), torch::tensor(p_idx), torch::tensor(n_idx)});
+        const auto d = model->forward(normalise(store.index_select(0, all)));
+        const auto qd = d.narrow(0, 0, B), pd = d.narrow(0, B, B);
+        const auto nd = d.narrow(0, 2 * B, B * o.negatives).view({B, o.negatives, -1});
+        // Summed here and divided by the step's total triplet count after the all-reduce: the
+        // gradient is exactly that of the mean loss over the whole step's batch, however it is split.
+        const auto loss_sum_local = triplet_loss(qd, pd, nd, o.margin) * static_cast<double>(B);
+        loss_sum_local.backward();
         torch::NoGradGuard g;
         const auto viol = (qd - pd).pow(2).sum(1, true) + o.margin - (qd.unsqueeze(1) - nd).pow(2).sum(2);
-        active += (viol > 0).sum().item<double>();
-        pairs += static_cast<int>(viol.numel());
+        local[1] = loss_sum_local.item<double>();
+        local[2] = (viol > 0).sum().item<double>();
+        local[3] = static_cast<double>(viol.numel());
       }
-      loss_sum += loss.item<double>();
+      double global[4];
+      {
+        torch::NoGradGuard g;
+        if (pg.size() == 1) {
+          std::copy(local, local + 4, global);
+        } else {
+          // One all-reduce per step: every gradient (zeros where this rank had no triplets) plus the
+          // four counters, summed over the ranks.
+          std::vector<torch::Tensor> flat;
+          for (const auto& p : params)
+            flat.push_back(p.grad().defined() ? p.grad().reshape({-1}) : torch::zeros({p.numel()}));
+          flat.push_back(torch::tensor(std::vector<float>(local, local + 4)));  // counts stay exact
+          auto buf = torch::cat(flat);
+          pg.all_reduce(buf, ProcessGroup::Op::Sum, "the gradient all-reduce");
+          const auto counters = buf.narrow(0, buf.size(0) - 4, 4);
+          for (int k = 0; k < 4; ++k) global[k] = counters[k].item<double>();
+          int64_t at = 0;
+          for (const auto& p : params) {
+            if (!p.grad().defined()) p.mutable_grad() = torch::zeros_like(p);
+            p.mutable_grad().copy_(buf.narrow(0, at, p.numel()).view(p.sizes()));
+            at += p.numel();
+          }
+        }
+        if (global[0] == 0) continue;  // no rank found a usable query: no step anywhere
+        for (const auto& p : params)
+          if (p.grad().defined()) p.mutable_grad().div_(global[0]);
+      }
+      opt->step();
+      active += global[2];
+      pairs += global[3];
+      loss_sum += global[1] / global[0];
       ++steps;
-      bar.update(end, fmt::format("loss {:.4f}", loss_sum / steps));
+      bar.update(std::min(order.size(), b + step_queries), fmt::format("loss {:.4f}", loss_sum / steps));
     }
     bar.finish();
+    // Identical gradients keep the ranks identical only while every rank rounds alike; machines with
+    // different CPUs (vector widths) may not. Re-sync to rank 0 each epoch and say if anything moved.
+    es.rank_drift = broadcast_weights(model, pg, "the end-of-epoch weight sync");
+    if (es.rank_drift > 0)
+      spdlog::warn("rank {}: weights had drifted from rank 0's by up to {:.3g}; re-synchronised", pg.rank(),
+                   es.rank_drift);
     es.loss = steps > 0 ? loss_sum / steps : 0.0;
     es.active = pairs > 0 ? active / pairs : 0.0;
     es.seconds = sw.elapsed_ms() / 1000.0;
     stats.push_back(es);
+    if (!lead) continue;  // the other ranks hold identical weights: one writer is enough
     spdlog::info("epoch {}: loss {:.4f}, active negatives {:.1f} %, {:.0f} s", epoch, es.loss,
                  100 * es.active, es.seconds);
     save_model(model, ckpt);
     torch::save(*opt, ckpt.string() + ".optim");
     std::ofstream(ckpt.string() + ".epoch") << epoch << "\n";
   }
-  save_model(model, o.out);
-  spdlog::info("wrote {}", o.out.string());
+  if (lead) {
+    save_model(model, o.out);
+    spdlog::info("wrote {}", o.out.string());
+  }
   return stats;
 }
 

@@ -1,6 +1,7 @@
 #pragma once
 // Training of ParC_NetVLAD on dynsynth `places` folders: triplet margin loss on squared L2 distances
 // with hard negatives mined from a periodically refreshed descriptor cache (NetVLAD-style).
+// Optionally data-parallel over several processes (libtorch's c10d, docs/place_recognition.md).
 // Torch-free interface.
 #include <cstdint>
 #include <filesystem>
@@ -23,14 +24,22 @@ struct TrainOptions {
   double margin = 0.1;             // on squared L2 distances
   int negatives = 5;               // hard negatives per query
   int negative_pool = 400;         // random negatives scored per query to pick the hardest from
-  int queries_per_epoch = 320;     // sampled training queries per epoch
-  int batch = 4;                   // queries per step (each brings 1 + 1 + negatives images)
+  int queries_per_epoch = 320;     // sampled training queries per epoch (all ranks together)
+  int batch = 4;                   // queries per step and rank (each brings 1 + 1 + negatives images)
   int refresh_every = 160;         // queries between descriptor-cache refreshes
   int kmeans_images = 200;         // images whose features initialise the NetVLAD centroids
   std::uint64_t seed = 1;          // torch::manual_seed and the mining RNG
   std::filesystem::path resume;    // checkpoint to continue from (empty = start fresh)
   int threads = 2;                 // libtorch intra-op threads
-  bool progress = true;            // progress bar
+  bool progress = true;            // progress bar (rank 0 only)
+  // Data parallelism: world_size processes each take `batch` queries of every step; gradients are
+  // summed over all ranks and divided by the step's total triplet count. Rank 0 hosts the rendezvous
+  // at master_addr:master_port and alone writes checkpoints and the model.
+  int world_size = 1;
+  int rank = 0;
+  std::string master_addr = "127.0.0.1";
+  int master_port = 29500;
+  double dist_timeout_s = 300;  // a rank silent this long (dead, stalled) fails the others
 };
 
 struct EpochStats {
@@ -38,6 +47,7 @@ struct EpochStats {
   double loss = 0;    // mean triplet loss
   double active = 0;  // fraction of (query, negative) pairs inside the margin
   double seconds = 0;
+  double rank_drift = 0;  // largest |weight − rank 0's| before the end-of-epoch sync (0: lockstep)
 };
 
 // Trains (or resumes) and writes the final model to options.out. Returns per-epoch statistics.
