@@ -9,6 +9,7 @@
 
 #include "../support/shared_data.hpp"
 #include "stillpoint/api/runner.hpp"
+#include "stillpoint/common/error.hpp"
 #include "stillpoint/io/tum_sequence.hpp"
 
 namespace sp::pipeline {
@@ -179,11 +180,44 @@ TEST_F(EndToEnd, StopMidRunWritesTheTrajectorySoFarAndShutsDownCleanly) {
   EXPECT_GE(lines, 39);
   EXPECT_LE(lines, 41);
   EXPECT_TRUE(std::filesystem::exists(options.out_dir / "stats.json"));
+  EXPECT_EQ(r.stats.value("stop_reason", ""), "stop requested");
+}
+
+// An error mid-run (here from the frame source) ends the run like a stop request: what was tracked is
+// written, and stats.json says why the run ended.
+TEST_F(EndToEnd, ErrorMidRunIsWrittenAsTheStopReason) {
+  struct FailingSource final : io::FrameSource {
+    explicit FailingSource(const std::filesystem::path& d) : inner(d) {}
+    std::optional<io::FrameData> next() override {
+      if (++count == 21) throw sp::Error("camera unplugged");
+      return inner.next();
+    }
+    [[nodiscard]] std::size_t size_hint() const override { return inner.size_hint(); }
+    [[nodiscard]] const io::CameraConfig& camera() const override { return inner.camera(); }
+    [[nodiscard]] std::size_t skipped_frames() const override { return inner.skipped_frames(); }
+    io::TumSequence inner;
+    int count = 0;
+  } source(kData / "office_a_static_xyz_150");
+  SystemConfig config = SystemConfig::load(kConfig);
+  config.dynamic.mode = "off";
+  RunOptions options;
+  options.out_dir = scratch("failed_source");
+  options.progress = false;
+  options.deterministic = true;
+  options.project_root = SP_SOURCE_DIR;
+  const RunResult r = run_slam(source, config, options);
+  EXPECT_FALSE(r.completed);
+  EXPECT_EQ(r.stop_reason, "stopped at frame 20: camera unplugged");
+  EXPECT_EQ(r.stats.value("stop_reason", ""), r.stop_reason);
+  EXPECT_FALSE(r.stats.value("completed", true));
+  const auto trajectory = read_file(options.out_dir / "trajectory.txt");
+  EXPECT_EQ(std::count(trajectory.begin(), trajectory.end(), '\n'), 21);  // header + 20 frames
 }
 
 TEST_F(EndToEnd, ThreadedRunFinishesAndTracksEveryFrame) {
   const RunResult r = run("office_a_static_xyz_150", "threaded", "off", /*deterministic=*/false);
   ASSERT_TRUE(r.completed);
+  EXPECT_FALSE(r.stats.contains("stop_reason"));
   EXPECT_EQ(r.stats["tracked_frames"].get<int>(), 150);
   ASSERT_TRUE(r.ate_rmse.has_value());
   EXPECT_LT(*r.ate_rmse, 0.02);

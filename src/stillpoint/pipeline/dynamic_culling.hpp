@@ -29,7 +29,7 @@ struct DynamicConfig {
   int detector_input = 320;
   // Detections scoring below this are dropped (0 = the model's own conf_threshold, 0.35 for every
   // shipped model). 0.25 keeps people half out of the view (their scores hover around 0.3): on the tune
-  // rooms, threaded, culling recall +1 to +9 points and walking ATE 8 % lower (docs/dynamic.md). Applies
+  // rooms, threaded, culling recall +1 to +9 points and walking ATE 6 % lower (docs/dynamic.md). Applies
   // to the model's defaults only; a `detector` section sets its own conf_threshold.
   double detector_min_score = 0.25;
   // Scheduling niceness of the detector thread (0 = as tracking). 2 keeps tracking within +5 ms of
