@@ -71,7 +71,7 @@ int to_int(const std::string& text, const std::string& what) {
 // Flags win; otherwise the variables torchrun sets (WORLD_SIZE, RANK, MASTER_ADDR, MASTER_PORT), so a
 // launcher that exports them per process needs no flags; otherwise a single process.
 void resolve_distributed(TrainArgs& a) {
-  auto& o = a.o;
+  auto& o = a.o.dist;
   const auto ws = env("WORLD_SIZE"), rk = env("RANK");
   o.world_size = a.world_size > 0 ? a.world_size : ws ? to_int(*ws, "WORLD_SIZE") : 1;
   o.rank = a.rank >= 0 ? a.rank : rk ? to_int(*rk, "RANK") : 0;
@@ -92,8 +92,8 @@ void resolve_distributed(TrainArgs& a) {
     o.master_addr = *addr;
     o.master_port = to_int(*port, "MASTER_PORT");
   }
-  if (o.world_size > 1 && o.rank == 0 && !o.resume.empty())
-    spdlog::info("resuming on every rank: each needs {} and its .epoch/.optim files", o.resume.string());
+  if (o.world_size > 1 && o.rank == 0 && !a.o.resume.empty())
+    spdlog::info("resuming on every rank: each needs {} and its .epoch/.optim files", a.o.resume.string());
 }
 
 void run_train(TrainArgs& a) {
@@ -115,7 +115,7 @@ void run_train(TrainArgs& a) {
   o.model.parc = a.parc == "on";
   o.model.cbam = a.cbam == "on";
   const auto stats = sp::place::train_model(o);
-  if (o.rank != 0) return;  // rank 0 writes the files
+  if (o.dist.rank != 0) return;  // rank 0 writes the files
   nlohmann::json j = nlohmann::json::array();
   for (const auto& s : stats) {
     j.push_back({{"epoch", s.epoch}, {"loss", s.loss}, {"active", s.active}, {"seconds", s.seconds}});
@@ -264,7 +264,7 @@ void add_vpr_command(CLI::App& app) {
   train->add_option("--master", ta->master,
                     "HOST:PORT where rank 0 listens (default: $MASTER_ADDR:$MASTER_PORT)");
   train
-      ->add_option("--dist-timeout", ta->o.dist_timeout_s,
+      ->add_option("--dist-timeout", ta->o.dist.timeout_s,
                    "seconds before a silent (dead or stalled) rank fails the others")
       ->check(CLI::Range(1.0, 86400.0))
       ->capture_default_str();

@@ -98,8 +98,8 @@ TrainOptions tiny_options(const fs::path& out) {
   o.seed = 3;
   o.threads = 1;
   o.progress = false;
-  o.master_port = free_port();
-  o.dist_timeout_s = 3;
+  o.dist.master_port = free_port();
+  o.dist.timeout_s = 3;
   return o;
 }
 
@@ -107,7 +107,7 @@ TrainOptions tiny_options(const fs::path& out) {
 pid_t spawn_rank1(const TrainOptions& o, const fs::path& out) {
   std::vector<std::string> env;
   for (char** e = environ; *e; ++e) env.emplace_back(*e);
-  env.push_back("SP_DDP_PORT=" + std::to_string(o.master_port));
+  env.push_back("SP_DDP_PORT=" + std::to_string(o.dist.master_port));
   env.push_back("SP_DDP_OUT=" + out.string());
   env.push_back("SP_DDP_EPOCHS=" + std::to_string(o.epochs));
   env.push_back("SP_DDP_BATCH=" + std::to_string(o.batch));
@@ -160,12 +160,12 @@ TEST(PlaceDistributed, DISABLED_Rank1Child) {
   const char* port = std::getenv("SP_DDP_PORT");
   if (!port) GTEST_SKIP() << "started by the other PlaceDistributed tests";
   TrainOptions o = tiny_options(std::getenv("SP_DDP_OUT"));
-  o.master_port = std::atoi(port);
+  o.dist.master_port = std::atoi(port);
   o.epochs = std::atoi(std::getenv("SP_DDP_EPOCHS"));
   o.batch = std::atoi(std::getenv("SP_DDP_BATCH"));
   o.queries_per_epoch = std::atoi(std::getenv("SP_DDP_QUERIES"));
-  o.world_size = 2;
-  o.rank = 1;
+  o.dist.world_size = 2;
+  o.dist.rank = 1;
   // An exception fails this process, which the parent sees in the exit code.
   for (const auto& s : train_model(o)) EXPECT_EQ(s.rank_drift, 0.0) << "epoch " << s.epoch;
 }
@@ -179,8 +179,8 @@ TEST(PlaceDistributed, TwoRanksMatchOneRankWithTheConcatenatedBatch) {
   // Same total batch split over two ranks: 2 queries each per step.
   TrainOptions two = tiny_options(dir / "two.pt");
   two.batch = 2;
-  two.world_size = 2;
-  two.rank = 0;
+  two.dist.world_size = 2;
+  two.dist.rank = 0;
   const fs::path child_out = dir / "two_rank1.pt";
   fs::remove(child_out);
   const pid_t child = spawn_rank1(two, child_out);
@@ -218,8 +218,8 @@ std::pair<std::string, double> rank0_after(const char* name, int signal_to_rank1
   fs::create_directories(dir);
   TrainOptions o = tiny_options(dir / (std::string(name) + ".pt"));
   o.epochs = 1000;  // never finishes by itself
-  o.world_size = 2;
-  o.rank = 0;
+  o.dist.world_size = 2;
+  o.dist.rank = 0;
   const fs::path ckpt_epoch = o.out.string() + ".ckpt.epoch";
   fs::remove(ckpt_epoch);
   const pid_t child = spawn_rank1(o, dir / (std::string(name) + "_rank1.pt"));
@@ -264,8 +264,8 @@ TEST(PlaceDistributed, StalledRankFailsTheOtherAfterTheTimeout) {
 
 TEST(PlaceDistributed, RankThatNeverJoinsFailsTheRendezvous) {
   TrainOptions o = tiny_options(fs::path(SP_TEST_TMP_DIR) / "place_ddp" / "alone.pt");
-  o.world_size = 2;
-  o.dist_timeout_s = 1;
+  o.dist.world_size = 2;
+  o.dist.timeout_s = 1;
   const auto t0 = Clock::now();
   try {
     train_model(o);
@@ -278,7 +278,7 @@ TEST(PlaceDistributed, RankThatNeverJoinsFailsTheRendezvous) {
 
 TEST(PlaceDistributed, RanksWithDifferentOptionsRefuseToTrain) {
   TrainOptions o = tiny_options(fs::path(SP_TEST_TMP_DIR) / "place_ddp" / "mismatch.pt");
-  o.world_size = 2;
+  o.dist.world_size = 2;
   TrainOptions other = o;
   other.queries_per_epoch = 16;
   const pid_t child = spawn_rank1(other, fs::path(SP_TEST_TMP_DIR) / "place_ddp" / "mismatch_rank1.pt");

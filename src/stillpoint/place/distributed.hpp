@@ -8,19 +8,9 @@
 #include <memory>
 #include <string>
 
+#include "stillpoint/place/dist_options.hpp"
+
 namespace sp::place {
-
-struct DistOptions {
-  int world_size = 1;  // 1: no communication, every collective is a no-op
-  int rank = 0;        // [0, world_size)
-  std::string master_addr = "127.0.0.1";
-  int master_port = 29500;
-  double timeout_s = 300;  // rendezvous and every collective
-};
-
-// Throws sp::Error for a world size < 1, a rank outside [0, world size), a port outside [1, 65535]
-// or an empty master address.
-void validate(const DistOptions& o);
 
 class ProcessGroup {
  public:

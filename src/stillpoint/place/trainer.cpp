@@ -181,11 +181,10 @@ void check_same_on_all_ranks(ProcessGroup& pg, const std::vector<std::pair<const
 }  // namespace
 
 std::vector<EpochStats> train_model(const TrainOptions& o) {
-  const DistOptions dopt{o.world_size, o.rank, o.master_addr, o.master_port, o.dist_timeout_s};
-  validate(dopt);
   if (o.threads > 0) at::set_num_threads(o.threads);
-  // Rendezvous before the slow image loading, so a misconfigured rank fails at once.
-  ProcessGroup pg(dopt);
+  // Rendezvous (options validated there) before the slow image loading, so a misconfigured rank fails
+  // at once.
+  ProcessGroup pg(o.dist);
   const bool lead = pg.rank() == 0;
   const bool progress = o.progress && lead;
   torch::manual_seed(o.seed);

@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "stillpoint/place/dist_options.hpp"
 #include "stillpoint/place/model_config.hpp"
 #include "stillpoint/place/retrieval.hpp"
 
@@ -35,11 +36,7 @@ struct TrainOptions {
   // Data parallelism: world_size processes each take `batch` queries of every step; gradients are
   // summed over all ranks and divided by the step's total triplet count. Rank 0 hosts the rendezvous
   // at master_addr:master_port and alone writes checkpoints and the model.
-  int world_size = 1;
-  int rank = 0;
-  std::string master_addr = "127.0.0.1";
-  int master_port = 29500;
-  double dist_timeout_s = 300;  // a rank silent this long (dead, stalled) fails the others
+  DistOptions dist;
 };
 
 struct EpochStats {
