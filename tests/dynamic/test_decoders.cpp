@@ -118,6 +118,32 @@ TEST(Decoders, ClassAwareNms) {
   EXPECT_NEAR(iou(cv::Rect2f(0, 0, 10, 10), cv::Rect2f(5, 0, 10, 10)), 50.f / 150.f, 1e-6);
 }
 
+// A box within the margin of any edge reaches the border; one clear of all four does not.
+TEST(Decoders, ReachesBorderOnEachEdgeWithinTheMargin) {
+  const cv::Size img(640, 480);
+  EXPECT_FALSE(reaches_border({100, 100, 200, 200}, img, 4.f));
+  EXPECT_TRUE(reaches_border({3, 100, 50, 50}, img, 4.f));     // left
+  EXPECT_TRUE(reaches_border({100, 2, 50, 50}, img, 4.f));     // top
+  EXPECT_TRUE(reaches_border({600, 100, 37, 50}, img, 4.f));   // right: 637 >= 636
+  EXPECT_TRUE(reaches_border({100, 400, 50, 77}, img, 4.f));   // bottom: 477 >= 476
+  EXPECT_FALSE(reaches_border({600, 100, 35, 50}, img, 4.f));  // right: 635 < 636
+  EXPECT_FALSE(reaches_border({5, 5, 50, 50}, img, 4.f));
+  EXPECT_TRUE(reaches_border({5, 5, 50, 50}, img, 5.f));
+}
+
+// Weak boxes survive only at the border; strong boxes survive anywhere.
+TEST(Decoders, WeakBoxesAreKeptOnlyWhereTheyReachTheBorder) {
+  std::vector<Detection> d{{{0, 100, 80, 300}, 0, 0.28f},     // weak, cut by the left edge: kept
+                           {{200, 100, 80, 300}, 0, 0.28f},   // weak, in full view: dropped
+                           {{300, 100, 80, 300}, 0, 0.50f},   // strong, in full view: kept
+                           {{560, 100, 80, 300}, 0, 0.30f}};  // weak, reaches the right edge: kept
+  drop_weak_interior(d, {640, 480}, 0.35f, 4.f);
+  ASSERT_EQ(d.size(), 3U);
+  EXPECT_FLOAT_EQ(d[0].box.x, 0.f);
+  EXPECT_FLOAT_EQ(d[1].box.x, 300.f);
+  EXPECT_FLOAT_EQ(d[2].box.x, 560.f);
+}
+
 TEST(Decoders, ResolveAutoFromShapeAndFileType) {
   DetectorConfig cfg;
   cfg.model = "x.onnx";

@@ -107,6 +107,21 @@ TEST(DynamicCulling, DetectorMinScoreReplacesTheModelsThreshold) {
   EXPECT_THROW((void)load_text("dynamic:\n  detector_min_score: 1.5\n"), ConfigError);
 }
 
+// dynamic.detector_min_score_interior reaches the detector as its interior threshold (0 by default:
+// one threshold for every box) and is range-checked.
+TEST(DynamicCulling, InteriorMinScoreReachesTheDetector) {
+  const geo::CameraIntrinsics camera;
+  const std::filesystem::path root(SP_SOURCE_DIR);
+  const std::string base = "dynamic:\n  mode: detector+flow\n  model: models/yolox_nano/yolox_nano.onnx\n";
+  const auto used = [&](const std::string& extra) {
+    const DynamicCulling culling(load_text(base + extra).dynamic, camera, true, std::nullopt, root);
+    return culling.detector_config().interior_conf_threshold;
+  };
+  EXPECT_FLOAT_EQ(used(""), 0.f);
+  EXPECT_FLOAT_EQ(used("  detector_min_score_interior: 0.35\n"), 0.35f);
+  EXPECT_THROW((void)load_text("dynamic:\n  detector_min_score_interior: -0.1\n"), ConfigError);
+}
+
 // README: "every key documented". A line that sets a value (`key: value`) must carry a `#` comment
 // (unit and range, see docs/CONVENTIONS.md); section headers (`key:` alone) need none.
 TEST(SystemConfig, EveryKeyOfTheShippedFileHasAComment) {

@@ -150,6 +150,19 @@ float iou(const cv::Rect2f& a, const cv::Rect2f& b) {
   return uni > 0.f ? inter / uni : 0.f;
 }
 
+bool reaches_border(const cv::Rect2f& box, cv::Size image, float margin_px) {
+  return box.x <= margin_px || box.y <= margin_px ||
+         box.x + box.width >= static_cast<float>(image.width) - margin_px ||
+         box.y + box.height >= static_cast<float>(image.height) - margin_px;
+}
+
+void drop_weak_interior(std::vector<Detection>& dets, cv::Size image, float min_interior_score,
+                        float margin_px) {
+  std::erase_if(dets, [&](const Detection& d) {
+    return d.score < min_interior_score && !reaches_border(d.box, image, margin_px);
+  });
+}
+
 std::vector<Detection> nms_per_class(std::vector<Detection> dets, float iou_threshold) {
   std::stable_sort(dets.begin(), dets.end(),
                    [](const Detection& a, const Detection& b) { return a.score > b.score; });

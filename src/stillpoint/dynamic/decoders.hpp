@@ -44,6 +44,13 @@ std::vector<Detection> nms_per_class(std::vector<Detection> dets, float iou_thre
 
 float iou(const cv::Rect2f& a, const cv::Rect2f& b);
 
+// True when the box comes within margin_px of an edge of an image of the given size.
+bool reaches_border(const cv::Rect2f& box, cv::Size image, float margin_px);
+
+// Drops boxes (image pixels) that score below min_interior_score and do not reach the image border.
+void drop_weak_interior(std::vector<Detection>& dets, cv::Size image, float min_interior_score,
+                        float margin_px);
+
 // "auto" resolved from the model file type and the output shape (rows x cols of the first output).
 // yolox when rows equal the YOLOX grid count, yolov5 when rows are 3x that (3 anchors per cell).
 std::string resolve_decoder(const DetectorConfig& cfg, int output_rows);

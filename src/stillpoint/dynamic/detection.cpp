@@ -165,6 +165,8 @@ DetectorConfig DetectorConfig::from_yaml(const ConfigReader& r) {
   r.read("scale", c.scale, 1e-6, 1e3);
   r.read("conf_threshold", c.conf_threshold, 0.f, 1.f);
   r.read("nms_threshold", c.nms_threshold, 0.f, 1.f);
+  r.read("interior_conf_threshold", c.interior_conf_threshold, 0.f, 1.f);
+  r.read("border_margin_px", c.border_margin_px, 0.f, 1000.f);
   r.read("class_names", c.class_names);
   r.read("dynamic_classes", c.dynamic_classes);
   r.read("threads", c.threads, 0, 64);

@@ -41,8 +41,14 @@ struct DetectorConfig {
   bool letterbox = true;  // true: resize by r = min(W/w, H/h), paste top-left, pad 114; false: plain resize
   bool swap_rb = false;   // true: feed RGB (the image comes in as BGR)
   double scale = 1.0;     // pixel scale factor (1/255 for Darknet and YOLOv5/v7 exports)
-  float conf_threshold = 0.35f;                           // final score (objectness x class) threshold [0, 1]
-  float nms_threshold = 0.45f;                            // class-aware NMS IoU threshold [0, 1]
+  float conf_threshold = 0.35f;  // final score (objectness x class) threshold [0, 1]
+  // Boxes that do not reach the image border need at least this score (0 or <= conf_threshold: no
+  // difference). People cut by the image edge score lower than people in full view, so a low
+  // conf_threshold with a higher interior one keeps the cut ones without more false boxes inside.
+  float interior_conf_threshold = 0.f;  // [0, 1]
+  float border_margin_px =
+      4.f;                      // a box within this many pixels of an image edge reaches the border [0, 1000]
+  float nms_threshold = 0.45f;  // class-aware NMS IoU threshold [0, 1]
   std::vector<std::string> class_names;                   // empty = COCO 80 built in
   std::vector<std::string> dynamic_classes = {"person"};  // only these are reported; empty = all classes
   // OpenCV worker threads for the forward pass. cv::setNumThreads is process-wide, so the default 0

@@ -17,6 +17,7 @@ DynamicConfig DynamicConfig::from_yaml(const ConfigReader& r) {
   if (c.detector_input != 0 && c.detector_input < 32)
     r.fail("detector_input", "must be 0 (the model's own input) or at least 32 px");
   r.read("detector_min_score", c.detector_min_score, 0.0, 1.0);
+  r.read("detector_min_score_interior", c.detector_min_score_interior, 0.0, 1.0);
   r.read("detector_nice", c.detector_nice, 0, 19);
   r.read("detector_fast_sigmoid", c.detector_fast_sigmoid);
   r.read("detector_fast_slice", c.detector_fast_slice);
@@ -82,6 +83,7 @@ DynamicCulling::DynamicCulling(const DynamicConfig& config, const geo::CameraInt
       if (config.detector_input > 0 && dc.decoder == "yolox")
         dc.fit_input_to_image(config.detector_input, camera.width, camera.height);
       if (config.detector_min_score > 0) dc.conf_threshold = static_cast<float>(config.detector_min_score);
+      dc.interior_conf_threshold = static_cast<float>(config.detector_min_score_interior);
     }
     detector_config_ = dc;
     detector_ = std::make_unique<dyn::AsyncDetector>(
