@@ -90,7 +90,8 @@ std::vector<Variant> variants_for(const std::string& ablation) {
     return {{"loop:off", {"--loop-detector", "off"}},
             {"loop:bow-keyframe", {"--loop-detector", "bow-keyframe"}},
             {"loop:bow-sequence", {"--loop-detector", "bow-sequence"}},
-            {"loop:netvlad", {"--loop-detector", "netvlad"}}};
+            {"loop:netvlad", {"--loop-detector", "netvlad"}},
+            {"loop:hybrid", {"--loop-detector", "hybrid"}}};
   }
   throw Error("unknown ablation '" + ablation + "' (none|dynamic|keyframes|loop)");
 }

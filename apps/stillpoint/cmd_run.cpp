@@ -196,7 +196,7 @@ int run(const RunArgs& args) {
     config.dynamic.model = std::filesystem::absolute(args.detector_model).lexically_normal().string();
   if (!args.keyframe_policy.empty()) config.tracker.keyframes.policy = args.keyframe_policy;
   if (!args.loop_detector.empty()) config.loop.detector = args.loop_detector;
-  if (config.loop.detector == "netvlad" && !stillpoint::has_netvlad())
+  if ((config.loop.detector == "netvlad" || config.loop.detector == "hybrid") && !stillpoint::has_netvlad())
     throw Error(pipeline::netvlad_unavailable_message());
   InterruptWatcher interrupt;  // before any thread starts, so all threads inherit the blocked mask
   std::unique_ptr<io::FrameSource> source;
@@ -312,9 +312,10 @@ void add_run_command(CLI::App& app) {
       ->check(CLI::IsMember({"off", "flow", "detector", "detector+flow", "oracle", "auto"}));
   cmd->add_option("--detector-model", args->detector_model,
                   "YOLO model (.onnx, or Darknet .cfg with .weights)");
-  cmd->add_option("--loop-detector", args->loop_detector,
-                  "Loop detection: off|bow-keyframe|bow-sequence|netvlad")
-      ->check(CLI::IsMember({"off", "bow-keyframe", "bow-sequence", "netvlad"}));
+  cmd->add_option(
+         "--loop-detector", args->loop_detector,
+         "Loop detection: off|bow-keyframe|bow-sequence|netvlad|hybrid (BoW re-ranked by ParC_NetVLAD)")
+      ->check(CLI::IsMember({"off", "bow-keyframe", "bow-sequence", "netvlad", "hybrid"}));
   cmd->add_option("--save-map", args->save_map, "Save the map to this file at the end (docs/map_files.md)");
   cmd->add_option("--load-map", args->load_map,
                   "Relocalise in this saved map and extend it (instead of starting a new map)");

@@ -176,7 +176,8 @@ System::System(const Config& config) : impl_(std::make_unique<Impl>()) {
     if (!config.keyframe_policy.empty()) system_config.tracker.keyframes.policy = config.keyframe_policy;
     if (system_config.dynamic.mode == "oracle")
       throw Error("dynamic mode 'oracle' needs a sequence's boxes.txt: it is for the CLI's run only");
-    if (system_config.loop.detector == "netvlad" && !sp::pipeline::has_place_recognition())
+    if ((system_config.loop.detector == "netvlad" || system_config.loop.detector == "hybrid") &&
+        !sp::pipeline::has_place_recognition())
       throw Error(sp::pipeline::netvlad_unavailable_message());
     impl_->camera = config.camera_file.empty() ? to_internal(config.camera)
                                                : sp::io::load_camera_config(config.camera_file);

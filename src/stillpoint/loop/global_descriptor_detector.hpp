@@ -25,6 +25,7 @@ class GlobalDescriptorLoopDetector final : public LoopDetector {
   [[nodiscard]] std::size_t queries() const override;
   [[nodiscard]] DetectorStats stats() const override;
   [[nodiscard]] std::string name() const override { return "netvlad"; }
+  [[nodiscard]] bool uses_global_descriptors() const override { return true; }
 
  private:
   LoopDetectorParams params_;

@@ -19,7 +19,7 @@ namespace sp::loop {
 
 LoopClosingConfig LoopClosingConfig::from_yaml(const ConfigReader& r) {
   LoopClosingConfig c;
-  r.read_choice("detector", c.detector, {"off", "bow-keyframe", "bow-sequence", "netvlad"});
+  r.read_choice("detector", c.detector, {"off", "bow-keyframe", "bow-sequence", "netvlad", "hybrid"});
   r.read("place_model", c.place_model);
   r.read("vocabulary", c.vocabulary);
   c.detection = LoopDetectorParams::from_yaml(r.section("detection"));
@@ -112,7 +112,11 @@ void LoopCloser::flush() {
 LoopClosingStats LoopCloser::stats() const {
   std::lock_guard lock(stats_mutex_);
   LoopClosingStats s = stats_;
-  if (detector_) s.queries = detector_->queries();
+  if (detector_) {
+    const DetectorStats d = detector_->stats();
+    s.queries = d.queries;
+    s.vetoed_by_descriptor = d.vetoed_by_descriptor;
+  }
   return s;
 }
 
@@ -144,9 +148,11 @@ void LoopCloser::process(map::KeyframeId kid) {
   }
   double global_ms = 0;
   if (needs_global_descriptors()) {
-    if (!describe_) throw Error("loop detector 'netvlad' needs a place model (set_global_describer)");
+    if (!describe_)
+      throw Error("loop detector '" + detector_->name() + "' needs a place model (set_global_describer)");
     if (thumbnail.empty())
-      throw Error("loop detector 'netvlad': keyframe " + std::to_string(kid.value()) + " has no thumbnail");
+      throw Error("loop detector '" + detector_->name() + "': keyframe " + std::to_string(kid.value()) +
+                  " has no thumbnail");
     Stopwatch global_watch;
     info.global = describe_(thumbnail);
     global_ms = global_watch.elapsed_ms();

@@ -52,6 +52,7 @@ struct LoopClosingStats {
   double verification_ms_total = 0;        // geometric verification, copying the evidence included
   double verification_lock_ms_total = 0;   // of which the map lock was held (copy in, counters out)
   std::size_t queries = 0;                 // database queries made by the detector
+  std::size_t vetoed_by_descriptor = 0;    // hybrid detector: BoW candidates dropped by descriptor distance
   double detection_ms_total = 0;           // candidate search in the database (not BoW, not verification)
   double bow_ms_total = 0;                 // BoW conversion of the keyframes
   double global_ms_total = 0;              // global (ParC_NetVLAD) descriptors of the keyframes
@@ -76,7 +77,9 @@ class LoopCloser {
   // integrator so this module does not depend on the network library. Set before the first process().
   using GlobalDescriber = std::function<Eigen::VectorXf(const cv::Mat& bgr)>;
   void set_global_describer(GlobalDescriber describe) { describe_ = std::move(describe); }
-  [[nodiscard]] bool needs_global_descriptors() const { return detector_ && detector_->name() == "netvlad"; }
+  [[nodiscard]] bool needs_global_descriptors() const {
+    return detector_ && detector_->uses_global_descriptors();
+  }
 
   // Called on the loop-closing thread with each keyframe's BoW vector once the detector has filed it
   // (before verification), so other users of the vector (the relocalisation database) need not

@@ -5,18 +5,27 @@
 
 #include "stillpoint/common/error.hpp"
 #include "stillpoint/loop/global_descriptor_detector.hpp"
+#include "stillpoint/loop/hybrid_detector.hpp"
 
 namespace sp::loop {
 
 LoopDetectorParams LoopDetectorParams::from_yaml(const sp::ConfigReader& r) {
   LoopDetectorParams p;
-  r.read_choice("method", p.method, {"bow-keyframe", "bow-sequence", "netvlad"});
+  r.read_choice("method", p.method, {"bow-keyframe", "bow-sequence", "netvlad", "hybrid"});
   r.read("min_common_ratio", p.min_common_ratio, 0.01, 1.0);
   r.read("group_score_ratio", p.group_score_ratio, 0.01, 1.0);
   r.read("group_size", p.group_size, 1, 100);
   r.read("min_consistency", p.min_consistency, 1, 20);
   p.sequence = SequenceParams::from_yaml(r.section("sequence"));
   p.global = GlobalDescriptorParams::from_yaml(r.section("global"));
+  p.hybrid = HybridParams::from_yaml(r.section("hybrid"));
+  return p;
+}
+
+HybridParams HybridParams::from_yaml(const sp::ConfigReader& r) {
+  HybridParams p;
+  r.read_choice("bow", p.bow, {"bow-keyframe", "bow-sequence"});
+  r.read("max_distance_sq", p.max_distance_sq, 1e-6, 4.0);
   return p;
 }
 
@@ -28,9 +37,15 @@ GlobalDescriptorParams GlobalDescriptorParams::from_yaml(const sp::ConfigReader&
 }
 
 void LoopDetectorParams::validate() const {
-  if (method != "bow-keyframe" && method != "bow-sequence" && method != "netvlad") {
-    throw sp::Error("loop detector: unknown method '" + method + "' (bow-keyframe | bow-sequence | netvlad)");
+  if (method != "bow-keyframe" && method != "bow-sequence" && method != "netvlad" && method != "hybrid") {
+    throw sp::Error("loop detector: unknown method '" + method +
+                    "' (bow-keyframe | bow-sequence | netvlad | hybrid)");
   }
+  if (hybrid.bow != "bow-keyframe" && hybrid.bow != "bow-sequence")
+    throw sp::Error("loop detector: hybrid.bow must be bow-keyframe or bow-sequence, not '" + hybrid.bow +
+                    "'");
+  if (!(hybrid.max_distance_sq > 0.0 && hybrid.max_distance_sq <= 4.0))
+    throw sp::Error("loop detector: hybrid.max_distance_sq must be in (0, 4]");
   if (!(global.max_distance_sq > 0.0 && global.max_distance_sq <= 4.0))
     throw sp::Error("loop detector: global.max_distance_sq must be in (0, 4]");
   if (global.top_k < 1 || global.top_k > 50)
@@ -52,6 +67,7 @@ std::unique_ptr<LoopDetector> make_loop_detector(const std::string& method,
   p.validate();
   if (method == "bow-sequence") return std::make_unique<SequenceLoopDetector>(p);
   if (method == "netvlad") return std::make_unique<GlobalDescriptorLoopDetector>(p);
+  if (method == "hybrid") return std::make_unique<HybridLoopDetector>(p);
   return std::make_unique<KeyframeLoopDetector>(p);
 }
 

@@ -2,6 +2,8 @@
 // Loop-candidate detection over BoW vectors, independent of the map. Two methods behind one interface:
 //  * "bow-keyframe": ORB-SLAM's DetectLoopCandidates + group consistency, one database query per keyframe;
 //  * "bow-sequence": keyframe sequences (keyframe_sequences.hpp), one query per closed sequence.
+// Two more in their own headers: "netvlad" (global_descriptor_detector.hpp) and "hybrid", BoW candidates
+// re-ranked by the global descriptor (hybrid_detector.hpp).
 //
 // Protocol (one loop-closing thread): for every new keyframe call detect(kf, view); it files the
 // keyframe itself after querying. Call add_keyframe(kf) instead for keyframes on which detection
@@ -44,10 +46,12 @@ class CovisibilityView {
 };
 
 struct DetectorStats {
-  std::size_t keyframes = 0;     // keyframes given to detect()
-  std::size_t queries = 0;       // inverted-file queries
-  std::size_t scored_pairs = 0;  // BoW vector pairs scored (queries, min scores, re-ranking)
-  std::size_t candidates = 0;    // loop candidates returned
+  std::size_t keyframes = 0;             // keyframes given to detect()
+  std::size_t queries = 0;               // inverted-file queries
+  std::size_t scored_pairs = 0;          // BoW vector pairs scored (queries, min scores, re-ranking)
+  std::size_t candidates = 0;            // loop candidates returned
+  std::size_t descriptor_pairs = 0;      // hybrid: candidates scored by global-descriptor distance
+  std::size_t vetoed_by_descriptor = 0;  // hybrid: BoW candidates dropped as too far in descriptor space
 };
 
 class LoopDetector {
@@ -63,6 +67,8 @@ class LoopDetector {
   [[nodiscard]] virtual std::size_t queries() const = 0;
   [[nodiscard]] virtual DetectorStats stats() const = 0;
   [[nodiscard]] virtual std::string name() const = 0;
+  // True when KeyframeInfo::global must be filled (a place model is needed).
+  [[nodiscard]] virtual bool uses_global_descriptors() const { return false; }
 };
 
 // Learned global descriptors (method "netvlad"); descriptors are L2-normalised, so d² is in [0, 4].
@@ -72,21 +78,30 @@ struct GlobalDescriptorParams {
   static GlobalDescriptorParams from_yaml(const sp::ConfigReader& r);
 };
 
+// BoW candidates re-ranked by the global descriptor (method "hybrid").
+struct HybridParams {
+  std::string bow =
+      "bow-sequence";            // the detector whose candidates are re-ranked: bow-keyframe | bow-sequence
+  double max_distance_sq = 1.2;  // candidates whose descriptors are farther apart are dropped [d²], (0, 4]
+  static HybridParams from_yaml(const sp::ConfigReader& r);
+};
+
 struct LoopDetectorParams {
-  std::string method = "bow-keyframe";  // bow-keyframe | bow-sequence | netvlad
+  std::string method = "bow-keyframe";  // bow-keyframe | bow-sequence | netvlad | hybrid
   double min_common_ratio = 0.8;        // candidates share >= ratio x the most shared words [-], (0, 1]
   double group_score_ratio = 0.75;      // group scores >= ratio x the best group score [-], (0, 1]
   int group_size = 10;                  // covisible keyframes in a candidate's score group [count], 1..100
   int min_consistency = 3;              // consecutive keyframes a candidate group must persist [count], 1..20
   SequenceParams sequence;              // bow-sequence only (YAML section "sequence")
   GlobalDescriptorParams global;        // netvlad only (YAML section "global")
+  HybridParams hybrid;                  // hybrid only (YAML section "hybrid")
 
   static LoopDetectorParams from_yaml(const sp::ConfigReader& r);
   void validate() const;  // throws sp::Error
 };
 
-// method: "bow-keyframe", "bow-sequence" or "netvlad" (overrides params.method); anything else is an
-// sp::Error.
+// method: "bow-keyframe", "bow-sequence", "netvlad" or "hybrid" (overrides params.method); anything
+// else is an sp::Error.
 std::unique_ptr<LoopDetector> make_loop_detector(const std::string& method, const LoopDetectorParams& params);
 std::unique_ptr<LoopDetector> make_loop_detector(const LoopDetectorParams& params);
 
