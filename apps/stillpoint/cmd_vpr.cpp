@@ -30,6 +30,7 @@ struct TrainArgs {
   int input_h = 0, input_w = 0, clusters = 0;
   int world_size = 0, rank = -1;  // unset (0, -1): torchrun's WORLD_SIZE / RANK, else one process
   std::string master;             // HOST:PORT; empty: MASTER_ADDR / MASTER_PORT
+  std::string augment = "on", lr_schedule = "cosine";
 };
 
 struct EvalArgs {
@@ -114,13 +115,10 @@ void run_train(TrainArgs& a) {
   if (a.clusters > 0) o.model.clusters = a.clusters;
   o.model.parc = a.parc == "on";
   o.model.cbam = a.cbam == "on";
-  const auto stats = sp::place::train_model(o);
-  if (o.dist.rank != 0) return;  // rank 0 writes the files
-  nlohmann::json j = nlohmann::json::array();
-  for (const auto& s : stats) {
-    j.push_back({{"epoch", s.epoch}, {"loss", s.loss}, {"active", s.active}, {"seconds", s.seconds}});
-  }
-  std::ofstream(o.out.string() + ".log.json") << j.dump(2) << "\n";
+  o.augment.enabled = a.augment == "on";
+  o.lr_schedule.kind = sp::place::parse_lr_schedule(a.lr_schedule);
+  // train_model refuses a --val room that is also trained on and writes the log files (rank 0).
+  sp::place::train_model(o);
 }
 
 // Ranks the database for each query and scores Recall@1/5/10/20; writes JSON when asked.
@@ -233,6 +231,28 @@ void add_vpr_command(CLI::App& app) {
   train->add_option("--clusters", ta->clusters)->check(CLI::Range(2, 512));
   train->add_option("--epochs", ta->o.epochs)->check(CLI::Range(1, 1000))->capture_default_str();
   train->add_option("--lr", ta->o.lr)->check(CLI::Range(1e-7, 1.0))->capture_default_str();
+  train->add_option("--lr-schedule", ta->lr_schedule, "per-step learning-rate schedule after the warm-up")
+      ->check(CLI::IsMember({"constant", "cosine", "step"}))
+      ->capture_default_str();
+  train->add_option("--warmup-epochs", ta->o.lr_schedule.warmup_epochs, "linear warm-up (0: none)")
+      ->check(CLI::Range(0.0, 1000.0))
+      ->capture_default_str();
+  train
+      ->add_option("--lr-step-epochs", ta->o.lr_schedule.step_epochs,
+                   "step schedule: epochs between decays (0: a third of the run)")
+      ->check(CLI::Range(0, 1000))
+      ->capture_default_str();
+  train->add_option("--lr-gamma", ta->o.lr_schedule.step_gamma, "step schedule: factor per decay")
+      ->check(CLI::Range(1e-6, 1.0))
+      ->capture_default_str();
+  train->add_option("--augment", ta->augment, "colour, exposure, blur, noise and crop augmentation")
+      ->check(CLI::IsMember({"on", "off"}))
+      ->capture_default_str();
+  train->add_option("--val", ta->o.val, "held-back places folders: recall per epoch, best epoch kept")
+      ->expected(1, -1);
+  train->add_option("--patience", ta->o.patience, "stop after N epochs without a better val R@1 (0: never)")
+      ->check(CLI::Range(0, 1000))
+      ->capture_default_str();
   train->add_option("--optimizer", ta->o.optimizer)
       ->check(CLI::IsMember({"adam", "sgd"}))
       ->capture_default_str();

@@ -24,6 +24,7 @@
 #include "stillpoint/place/distributed.hpp"
 #include "stillpoint/place/model.hpp"
 #include "stillpoint/place/trainer.hpp"
+#include "tiny_places.hpp"
 
 extern char** environ;
 
@@ -112,6 +113,9 @@ pid_t spawn_rank1(const TrainOptions& o, const fs::path& out) {
   env.push_back("SP_DDP_EPOCHS=" + std::to_string(o.epochs));
   env.push_back("SP_DDP_BATCH=" + std::to_string(o.batch));
   env.push_back("SP_DDP_QUERIES=" + std::to_string(o.queries_per_epoch));
+  env.push_back("SP_DDP_LR=" + std::to_string(o.lr));
+  env.push_back("SP_DDP_PATIENCE=" + std::to_string(o.patience));
+  if (!o.val.empty()) env.push_back("SP_DDP_VAL=" + o.val.front().string());
   std::vector<char*> envp;
   for (auto& e : env) envp.push_back(e.data());
   envp.push_back(nullptr);
@@ -164,6 +168,9 @@ TEST(PlaceDistributed, DISABLED_Rank1Child) {
   o.epochs = std::atoi(std::getenv("SP_DDP_EPOCHS"));
   o.batch = std::atoi(std::getenv("SP_DDP_BATCH"));
   o.queries_per_epoch = std::atoi(std::getenv("SP_DDP_QUERIES"));
+  o.lr = std::atof(std::getenv("SP_DDP_LR"));
+  o.patience = std::atoi(std::getenv("SP_DDP_PATIENCE"));
+  if (const char* val = std::getenv("SP_DDP_VAL")) o.val = {val};
   o.dist.world_size = 2;
   o.dist.rank = 1;
   // An exception fails this process, which the parent sees in the exit code.
@@ -209,6 +216,37 @@ TEST(PlaceDistributed, TwoRanksMatchOneRankWithTheConcatenatedBatch) {
   EXPECT_LT(same.global, 1e-5);
   EXPECT_LT(same.per_tensor, 1e-4) << same.where;
   EXPECT_GT(control.global, 1e-4);
+}
+
+// Validation and early stopping over two ranks: both must stop after the same epoch (a rank that went
+// on alone would wait in a collective and fail after the 3 s timeout, so its exit code tells), and
+// rank 0 must report the same recall a single process computes.
+TEST(PlaceDistributed, TwoRanksStopEarlyTogether) {
+  const fs::path dir = fs::path(SP_TEST_TMP_DIR) / "place_ddp";
+  fs::create_directories(dir);
+  const fs::path val = test::write_tiny_places(dir / "val", {"v1", "v2"});
+  TrainOptions o = tiny_options(dir / "early.pt");
+  o.lr = 0;  // the val recall cannot improve: stop after 1 + patience epochs
+  o.epochs = 50;
+  o.patience = 2;
+  o.val = {val};
+  TrainOptions alone = o;
+  alone.out = dir / "early_alone.pt";
+  alone.dist.master_port = free_port();
+  const auto s1 = train_model(alone);
+  o.batch = 2;
+  o.dist.world_size = 2;
+  const pid_t child = spawn_rank1(o, dir / "early_rank1.pt");
+  ASSERT_GT(child, 0);
+  const auto s2 = train_model(o);
+  EXPECT_EQ(wait_exit_code(child), 0) << "rank 1 did not stop with rank 0";
+  ASSERT_EQ(s2.size(), 3u);
+  ASSERT_EQ(s1.size(), 3u);
+  for (size_t e = 0; e < s2.size(); ++e) {
+    ASSERT_TRUE(s2[e].val.has_value());
+    EXPECT_EQ(s2[e].val->recall[0], s1[e].val->recall[0]) << "epoch " << e + 1;
+    EXPECT_EQ(s2[e].val->queries, s1[e].val->queries);
+  }
 }
 
 // Runs rank 0 in a thread, waits for its first checkpoint, does `act` to rank 1, and returns rank 0's

@@ -11,8 +11,10 @@ ModelConfig ModelConfig::tiny() { return ModelConfig{}; }
 
 ModelConfig ModelConfig::small() {
   ModelConfig c = scaled(tiny(), 0.25, 1.0 / 3.0);
-  c.input_height = 120;
-  c.input_width = 160;
+  // 240×320 (the dynsynth frame size): the final map is 7×10 local features for NetVLAD, not 3×5.
+  // Models keep the size they were trained at (model files store it).
+  c.input_height = 240;
+  c.input_width = 320;
   return c;
 }
 

@@ -20,7 +20,7 @@ struct ModelConfig {
 
   // Full ConvNeXt-Tiny (the paper's definition).
   static ModelConfig tiny();
-  // Width ×0.25, depths 1-1-3-1, 120×160 input: trainable on a 2-core CPU.
+  // Width ×0.25, depths 1-1-3-1, 240×320 input: trainable on a 2-core CPU.
   static ModelConfig small();
   // Scales a base configuration (widths rounded to multiples of 8, depths at least 1).
   static ModelConfig scaled(const ModelConfig& base, double width_mult, double depth_mult);

@@ -4,17 +4,21 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <cmath>
 #include <fstream>
+#include <iomanip>
 #include <numeric>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <random>
+#include <set>
 
 #include "stillpoint/common/error.hpp"
 #include "stillpoint/common/progress_bar.hpp"
 #include "stillpoint/common/timing.hpp"
 #include "stillpoint/place/distributed.hpp"
 #include "stillpoint/place/model.hpp"
+#include "stillpoint/place/training_log.hpp"
 
 namespace sp::place {
 
@@ -33,6 +37,30 @@ std::vector<PlaceImage> collect_places(const std::vector<fs::path>& dirs) {
   return all;
 }
 
+void validate(const TrainOptions& o) {
+  const auto need = [](bool ok, const std::string& what) {
+    if (!ok) throw sp::Error("vpr train: " + what);
+  };
+  need(!o.data.empty(), "no --data folder");
+  need(!o.out.empty(), "no --out file");
+  need(o.epochs >= 1 && o.epochs <= 1000, fmt::format("epochs must be in [1, 1000], not {}", o.epochs));
+  need(std::isfinite(o.lr) && o.lr >= 0 && o.lr <= 1, fmt::format("lr must be in [0, 1], not {}", o.lr));
+  need(o.optimizer == "adam" || o.optimizer == "sgd", "optimizer must be adam or sgd, not " + o.optimizer);
+  need(o.margin >= 0, fmt::format("margin must be >= 0, not {}", o.margin));
+  need(o.negatives >= 1, fmt::format("negatives must be >= 1, not {}", o.negatives));
+  need(o.negative_pool >= o.negatives,
+       fmt::format("the negative pool ({}) must hold at least --negatives ({})", o.negative_pool,
+                   o.negatives));
+  need(o.queries_per_epoch >= 1, "queries per epoch must be >= 1");
+  need(o.batch >= 1, fmt::format("batch must be >= 1, not {}", o.batch));
+  need(o.refresh_every >= 1, "refresh-every must be >= 1");
+  need(o.kmeans_images >= 1, "kmeans-images must be >= 1");
+  need(o.patience >= 0, fmt::format("patience must be >= 0, not {}", o.patience));
+  need(o.patience == 0 || !o.val.empty(), "--patience needs --val (early stopping watches the val recall)");
+  validate(o.lr_schedule);
+  validate(o.augment);
+}
+
 namespace {
 
 // Normalised float batch from a uint8 (N,3,H,W) store.
@@ -45,12 +73,12 @@ torch::Tensor normalise(const torch::Tensor& u8) {
 }
 
 // Every image resized to the model input, RGB, uint8 (N,3,H,W): a few hundred MB at most.
-torch::Tensor load_images(const std::vector<PlaceImage>& imgs, int h, int w, bool progress) {
-  auto store = torch::empty({static_cast<int64_t>(imgs.size()), 3, h, w}, torch::kUInt8);
-  sp::ProgressBar bar("loading images", imgs.size(), progress);
-  for (size_t i = 0; i < imgs.size(); ++i) {
-    const cv::Mat bgr = cv::imread(imgs[i].file.string(), cv::IMREAD_COLOR);
-    if (bgr.empty()) throw sp::InputError(imgs[i].file.string(), 0, "cannot read image");
+torch::Tensor load_images(const std::vector<fs::path>& files, int h, int w, bool progress, const char* what) {
+  auto store = torch::empty({static_cast<int64_t>(files.size()), 3, h, w}, torch::kUInt8);
+  sp::ProgressBar bar(what, files.size(), progress);
+  for (size_t i = 0; i < files.size(); ++i) {
+    const cv::Mat bgr = cv::imread(files[i].string(), cv::IMREAD_COLOR);
+    if (bgr.empty()) throw sp::InputError(files[i].string(), 0, "cannot read image");
     // Same resize and colour order as image_to_tensor(); normalisation happens per batch.
     cv::Mat small;
     cv::resize(bgr, small, cv::Size(w, h), 0, 0, cv::INTER_AREA);
@@ -178,9 +206,133 @@ void check_same_on_all_ranks(ProcessGroup& pg, const std::vector<std::pair<const
   }
 }
 
+// The --val sets: each scored as `vpr eval --dataset DIR` would (its own query/database split), all
+// images in one uint8 store so that describing them reuses the sharded cache code.
+struct ValData {
+  struct Set {
+    std::string dir;
+    int64_t first = 0;  // row of its first query in the store; the database follows the queries
+    int64_t queries = 0, database = 0;
+    std::vector<std::vector<int>> ground_truth;
+  };
+  std::vector<Set> sets;
+  torch::Tensor store;
+};
+
+// A val room that is also trained on would make the recall (and early stopping) meaningless. Compares
+// places folders and room names (scene.txt): a re-rendered copy of a training room is the same room.
+// Runs before any image is loaded, so the mistake costs nothing.
+void check_val_disjoint(const TrainOptions& o, const std::vector<PlaceImage>& train_imgs) {
+  std::set<fs::path> train_dirs;
+  std::set<std::string> train_rooms;
+  for (const auto& d : o.data)
+    for (const auto& f : find_places_folders(d)) train_dirs.insert(fs::weakly_canonical(f));
+  for (const auto& im : train_imgs) train_rooms.insert(im.room);
+  for (const auto& dir : o.val) {
+    if (!fs::is_directory(dir)) throw sp::InputError(dir.string(), 0, "--val folder not found");
+    for (const auto& folder : find_places_folders(dir)) {
+      if (train_dirs.count(fs::weakly_canonical(folder)))
+        throw sp::InputError(folder.string(), 0,
+                             "--val folder is also in --data: val rooms must never be trained on");
+      const auto imgs = load_places_folder(folder);
+      if (train_rooms.count(imgs.front().room))
+        throw sp::InputError(
+            folder.string(), 0,
+            "--val room '" + imgs.front().room + "' is also a training room (same scene.txt)");
+    }
+  }
+}
+
+ValData load_val(const TrainOptions& o, int h, int w, bool lead) {
+  ValData v;
+  if (o.val.empty()) return v;
+  std::vector<fs::path> files;
+  for (const auto& dir : o.val) {
+    const auto set = load_retrieval_set(dir, o.rules);
+    if (set.queries.empty())
+      throw sp::InputError(dir.string(), 0, "--val set has no query with a true match");
+    ValData::Set s{dir.string(), static_cast<int64_t>(files.size()), static_cast<int64_t>(set.queries.size()),
+                   static_cast<int64_t>(set.database.size()), set.ground_truth};
+    files.insert(files.end(), set.queries.begin(), set.queries.end());
+    files.insert(files.end(), set.database.begin(), set.database.end());
+    if (lead)
+      spdlog::info("val {}: {} queries, {} database images ({})", s.dir, s.queries, s.database, set.name);
+    v.sets.push_back(std::move(s));
+  }
+  v.store = load_images(files, h, w, o.progress && lead, "loading val images");
+  return v;
+}
+
+// Recall@N pooled over the val sets (each query counts once). Every rank describes its share and the
+// sum gives all ranks the same descriptors; rank 0's figures are then broadcast anyway, so that the
+// early-stopping and best-epoch decisions are identical by construction, not by float agreement.
+RecallResult evaluate_val(ParCNetVLAD& model, const ValData& v, ProcessGroup& pg) {
+  const auto desc = describe_all(model, v.store, 32, pg).contiguous();
+  const int64_t dim = desc.size(1);
+  using RowMajor = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+  const auto rows = [&](int64_t first, int64_t n) -> Eigen::MatrixXf {
+    return Eigen::Map<const RowMajor>(desc.data_ptr<float>() + first * dim, n, dim);
+  };
+  auto hits = torch::zeros({static_cast<int64_t>(RecallResult::kN.size()) + 1}, torch::kFloat64);
+  for (const auto& s : v.sets) {
+    const auto r = recall_at_n(
+        sp::place::squared_distances(rows(s.first, s.queries), rows(s.first + s.queries, s.database)),
+        s.ground_truth);
+    for (size_t k = 0; k < RecallResult::kN.size(); ++k)
+      hits[static_cast<int64_t>(k)] += r.recall[k] * static_cast<double>(r.queries);
+    hits[static_cast<int64_t>(RecallResult::kN.size())] += r.queries;
+  }
+  pg.broadcast(hits, 0, "the validation broadcast");
+  RecallResult out;
+  out.queries = static_cast<int>(hits[static_cast<int64_t>(RecallResult::kN.size())].item<double>());
+  for (size_t k = 0; k < RecallResult::kN.size(); ++k)
+    out.recall[k] = out.queries > 0 ? hits[static_cast<int64_t>(k)].item<double>() / out.queries : 0.0;
+  return out;
+}
+
+// Augments a training batch in place: row r of `batch` (uint8 N,3,H,W) with keys[r].
+void augment_batch(torch::Tensor& batch, const AugmentOptions& o, const std::vector<AugmentKey>& keys) {
+  if (!o.enabled) return;
+  const int h = static_cast<int>(batch.size(2)), w = static_cast<int>(batch.size(3));
+  for (int64_t r = 0; r < batch.size(0); ++r) {
+    const auto hwc = batch[r].permute({1, 2, 0}).contiguous();
+    const cv::Mat in(h, w, CV_8UC3, hwc.data_ptr<uint8_t>());
+    cv::Mat out = augment_image(in, o, keys[static_cast<size_t>(r)]);
+    batch[r].copy_(torch::from_blob(out.data, {h, w, 3}, torch::kUInt8).permute({2, 0, 1}));
+  }
+}
+
+void set_lr(torch::optim::Optimizer& opt, double lr) {
+  for (auto& g : opt.param_groups()) g.options().set_lr(lr);
+}
+
+// <ckpt>.epoch: the last finished epoch, then (with --val) "best_epoch best_R@1" so that a resumed run
+// keeps comparing against the best so far and still writes that epoch's weights (<ckpt>.best).
+struct CheckpointState {
+  int epoch = 0;
+  int best_epoch = 0;
+  double best_r1 = -1;
+};
+
+CheckpointState read_checkpoint_state(const fs::path& ckpt) {
+  const fs::path file = ckpt.string() + ".epoch";
+  std::ifstream st(file);
+  CheckpointState c;
+  if (!(st >> c.epoch)) throw sp::InputError(file.string(), 1, "missing epoch count");
+  if (!(st >> c.best_epoch >> c.best_r1)) c.best_epoch = 0, c.best_r1 = -1;  // before validation existed
+  return c;
+}
+
+void write_checkpoint_state(const fs::path& ckpt, const CheckpointState& c) {
+  std::ofstream st(ckpt.string() + ".epoch");
+  st << c.epoch << "\n";
+  if (c.best_epoch > 0) st << c.best_epoch << " " << std::setprecision(17) << c.best_r1 << "\n";
+}
+
 }  // namespace
 
 std::vector<EpochStats> train_model(const TrainOptions& o) {
+  validate(o);
   if (o.threads > 0) at::set_num_threads(o.threads);
   // Rendezvous (options validated there) before the slow image loading, so a misconfigured rank fails
   // at once.
@@ -193,20 +345,35 @@ std::vector<EpochStats> train_model(const TrainOptions& o) {
   const auto mining = build_mining(imgs, o.rules);
   if (mining.queries.empty()) throw sp::Error("no training image has a positive: render more views per room");
   if (lead) spdlog::info("training: {} images, {} with positives", imgs.size(), mining.queries.size());
+  check_val_disjoint(o, imgs);
 
   ParCNetVLAD model{nullptr};
-  int start_epoch = 0;
+  CheckpointState resumed;
   const fs::path ckpt = o.out.string() + ".ckpt";
   if (!o.resume.empty()) {
     model = load_model(o.resume);
-    std::ifstream st(o.resume.string() + ".epoch");
-    if (!(st >> start_epoch)) throw sp::InputError(o.resume.string() + ".epoch", 1, "missing epoch count");
-    if (lead) spdlog::info("resuming {} after epoch {}", o.resume.string(), start_epoch);
+    resumed = read_checkpoint_state(o.resume);
+    if (lead) spdlog::info("resuming {} after epoch {}", o.resume.string(), resumed.epoch);
   } else {
     model = ParCNetVLAD(o.model);
   }
+  const int start_epoch = resumed.epoch;
   if (lead) spdlog::info("model: {}", model->cfg.summary());
-  const auto store = load_images(imgs, model->cfg.input_height, model->cfg.input_width, progress);
+  std::vector<fs::path> files;
+  for (const auto& im : imgs) files.push_back(im.file);
+  const auto store =
+      load_images(files, model->cfg.input_height, model->cfg.input_width, progress, "loading images");
+  const ValData val = load_val(o, model->cfg.input_height, model->cfg.input_width, lead);
+  // Best-epoch bookkeeping (only with --val). The best weights live in <ckpt>.best; a resumed run
+  // starts from the checkpoint's record and its .best file.
+  EarlyStopping stopper(o.patience);
+  fs::path best_file = ckpt.string() + ".best";
+  if (!val.sets.empty() && resumed.best_epoch > 0) {
+    stopper.restore(resumed.best_r1, resumed.best_epoch);
+    best_file = o.resume.string() + ".best";
+    if (lead && !fs::exists(best_file))  // only rank 0 writes the model
+      throw sp::InputError(best_file.string(), 0, "the best epoch's weights of the resumed run are missing");
+  }
   if (o.resume.empty() && lead) init_centroids(model, store, o.kmeans_images, rng);
   // Every rank starts from rank 0's weights (random init and k-means centroids alike).
   broadcast_weights(model, pg, "the initial weight broadcast");
@@ -215,10 +382,8 @@ std::vector<EpochStats> train_model(const TrainOptions& o) {
   if (o.optimizer == "sgd") {
     opt = std::make_unique<torch::optim::SGD>(model->parameters(),
                                               torch::optim::SGDOptions(o.lr).momentum(0.9));
-  } else if (o.optimizer == "adam") {
-    opt = std::make_unique<torch::optim::Adam>(model->parameters(), torch::optim::AdamOptions(o.lr));
   } else {
-    throw sp::Error("optimizer must be adam or sgd, not " + o.optimizer);
+    opt = std::make_unique<torch::optim::Adam>(model->parameters(), torch::optim::AdamOptions(o.lr));
   }
   bool optim_loaded = false;
   if (!o.resume.empty() && fs::exists(o.resume.string() + ".optim")) {
@@ -232,16 +397,37 @@ std::vector<EpochStats> train_model(const TrainOptions& o) {
                                {"the query count", static_cast<double>(mining.queries.size())},
                                {"the parameter count", static_cast<double>(n_params)},
                                {"the resumed epoch", start_epoch},
+                               {"the resumed best val epoch", stopper.best_epoch()},
                                {"whether an optimiser state was resumed", optim_loaded ? 1.0 : 0.0},
+                               {"the val image count", val.store.defined() ? val.store.size(0) : 0.0},
                                {"--epochs", o.epochs},
                                {"--batch", o.batch},
                                {"--queries-per-epoch", o.queries_per_epoch},
                                {"--negatives", o.negatives},
                                {"--refresh-every", o.refresh_every},
+                               {"--patience", o.patience},
+                               {"--augment", o.augment.enabled ? 1.0 : 0.0},
+                               {"--lr-schedule", static_cast<double>(o.lr_schedule.kind)},
+                               {"--warmup-epochs", o.lr_schedule.warmup_epochs},
                                {"--seed", static_cast<double>(o.seed)}});
 
   // One step consumes `batch` queries on each rank: rank r takes [b + r·batch, b + (r+1)·batch).
   const size_t step_queries = static_cast<size_t>(o.batch) * static_cast<size_t>(pg.size());
+  const size_t epoch_queries =
+      std::min<size_t>(mining.queries.size(), static_cast<size_t>(o.queries_per_epoch));
+  const auto steps_per_epoch = static_cast<int64_t>((epoch_queries + step_queries - 1) / step_queries);
+  if (lead)
+    spdlog::info("lr {} ({}, warm-up {} epochs, {} steps per epoch), augmentation {}, validation {}", o.lr,
+                 to_string(o.lr_schedule.kind), o.lr_schedule.warmup_epochs, steps_per_epoch,
+                 o.augment.enabled ? "on" : "off",
+                 val.sets.empty() ? std::string("off")
+                                  : fmt::format("on ({} sets, patience {})", val.sets.size(), o.patience));
+  // The log keeps the epochs of the run this one resumes (rows up to the resumed epoch).
+  std::vector<EpochStats> log_rows;
+  if (lead && start_epoch > 0) {
+    for (const auto& r : read_training_log(o.out))
+      if (r.epoch <= start_epoch) log_rows.push_back(r);
+  }
   std::vector<EpochStats> stats;
   for (int epoch = start_epoch + 1; epoch <= o.epochs; ++epoch) {
     // Per-epoch seeds keep a resumed run identical to an uninterrupted one. The query order is the
@@ -252,7 +438,7 @@ std::vector<EpochStats> train_model(const TrainOptions& o) {
     sp::Stopwatch sw;
     std::vector<int> order = mining.queries;
     std::shuffle(order.begin(), order.end(), erng);
-    order.resize(std::min<size_t>(order.size(), static_cast<size_t>(o.queries_per_epoch)));
+    order.resize(epoch_queries);
     EpochStats es;
     es.epoch = epoch;
     double loss_sum = 0, active = 0, pairs = 0;
@@ -261,10 +447,16 @@ std::vector<EpochStats> train_model(const TrainOptions& o) {
     std::uniform_int_distribution<int> pick(0, static_cast<int>(imgs.size()) - 1);
     sp::ProgressBar bar(fmt::format("epoch {}/{}", epoch, o.epochs), order.size(), progress);
     for (size_t b = 0; b < order.size(); b += step_queries) {
+      // The schedule is a function of the global step only: resumed and distributed runs agree.
+      const int64_t global_step =
+          static_cast<int64_t>(epoch - 1) * steps_per_epoch + static_cast<int64_t>(b / step_queries);
+      es.lr = learning_rate(o.lr_schedule, o.lr, global_step, steps_per_epoch, o.epochs);
+      set_lr(*opt, es.lr);
       if (b % static_cast<size_t>(std::max(o.refresh_every, 1)) < step_queries || !cache.defined()) {
         cache = describe_all(model, store, 32, pg);
       }
       std::vector<int64_t> q_idx, p_idx, n_idx;
+      std::vector<int64_t> q_pos;  // each triplet's query position in the epoch: the augmentation key
       const size_t begin =
           std::min(order.size(), b + static_cast<size_t>(pg.rank()) * static_cast<size_t>(o.batch));
       const size_t end = std::min(order.size(), begin + static_cast<size_t>(o.batch));
@@ -296,6 +488,7 @@ std::vector<EpochStats> train_model(const TrainOptions& o) {
         const auto hard = std::get<1>(nd.topk(o.negatives, 0, /*largest=*/false));
         q_idx.push_back(q);
         p_idx.push_back(best_pos);
+        q_pos.push_back(static_cast<int64_t>(i));
         for (int64_t k = 0; k < o.negatives; ++k)
           n_idx.push_back(pool[static_cast<size_t>(hard[k].item<int64_t>())]);
       }
@@ -305,7 +498,18 @@ std::vector<EpochStats> train_model(const TrainOptions& o) {
       double local[4] = {static_cast<double>(B), 0, 0, 0};  // triplets, loss sum, active pairs, pairs
       if (B > 0) {
         const auto all = torch::cat({torch::tensor(q_idx), torch::tensor(p_idx), torch::tensor(n_idx)});
-        const auto d = model->forward(normalise(store.index_select(0, all)));
+        auto images = store.index_select(0, all);
+        if (o.augment.enabled) {
+          // Rows: B queries, B positives, then B × negatives; keyed by (seed, epoch, position, slot).
+          std::vector<AugmentKey> keys;
+          for (int64_t j = 0; j < B; ++j) keys.push_back({o.seed, epoch, q_pos[static_cast<size_t>(j)], 0});
+          for (int64_t j = 0; j < B; ++j) keys.push_back({o.seed, epoch, q_pos[static_cast<size_t>(j)], 1});
+          for (int64_t j = 0; j < B; ++j)
+            for (int k = 0; k < o.negatives; ++k)
+              keys.push_back({o.seed, epoch, q_pos[static_cast<size_t>(j)], 2 + k});
+          augment_batch(images, o.augment, keys);
+        }
+        const auto d = model->forward(normalise(images));
         const auto qd = d.narrow(0, 0, B), pd = d.narrow(0, B, B);
         const auto nd = d.narrow(0, 2 * B, B * o.negatives).view({B, o.negatives, -1});
         // Summed here and divided by the step's total triplet count after the all-reduce: the
@@ -361,18 +565,49 @@ std::vector<EpochStats> train_model(const TrainOptions& o) {
                    es.rank_drift);
     es.loss = steps > 0 ? loss_sum / steps : 0.0;
     es.active = pairs > 0 ? active / pairs : 0.0;
-    es.seconds = sw.elapsed_ms() / 1000.0;
+    es.seconds = sw.elapsed_ms() / 1000.0;  // training only: validation is timed on its own below
+    bool improved = false;
+    if (!val.sets.empty()) {
+      sp::Stopwatch vw;
+      es.val = evaluate_val(model, val, pg);  // all ranks take part, all get rank 0's figures
+      improved = stopper.update(epoch, es.val->recall[0]);
+      if (lead)
+        spdlog::info("epoch {}: val R@1 {:.3f} R@5 {:.3f} R@10 {:.3f} ({} queries, {:.0f} s){}", epoch,
+                     es.val->recall[0], es.val->recall[1], es.val->recall[2], es.val->queries,
+                     vw.elapsed_ms() / 1000.0, improved ? ", best so far" : "");
+    }
     stats.push_back(es);
-    if (!lead) continue;  // the other ranks hold identical weights: one writer is enough
-    spdlog::info("epoch {}: loss {:.4f}, active negatives {:.1f} %, {:.0f} s", epoch, es.loss,
-                 100 * es.active, es.seconds);
-    save_model(model, ckpt);
-    torch::save(*opt, ckpt.string() + ".optim");
-    std::ofstream(ckpt.string() + ".epoch") << epoch << "\n";
+    const bool stop = stopper.stop(epoch);  // identical on every rank: from broadcast figures
+    if (lead) {                             // the other ranks hold identical weights: one writer is enough
+      spdlog::info("epoch {}: loss {:.4f}, active negatives {:.1f} %, lr {:.3g}, {:.0f} s", epoch, es.loss,
+                   100 * es.active, es.lr, es.seconds);
+      save_model(model, ckpt);
+      torch::save(*opt, ckpt.string() + ".optim");
+      if (improved) {
+        best_file = ckpt.string() + ".best";
+        save_model(model, best_file);
+      }
+      write_checkpoint_state(ckpt, {epoch, stopper.best_epoch(), stopper.best()});
+      log_rows.push_back(es);
+      write_training_log(o.out, log_rows);
+    }
+    if (stop) {
+      if (lead)
+        spdlog::info(
+            "early stop after epoch {}: val R@1 has not improved for {} epochs (best {:.3f} at epoch {})",
+            epoch, o.patience, stopper.best(), stopper.best_epoch());
+      break;
+    }
   }
   if (lead) {
-    save_model(model, o.out);
-    spdlog::info("wrote {}", o.out.string());
+    if (!val.sets.empty() && stopper.best_epoch() > 0) {
+      fs::copy_file(best_file, o.out, fs::copy_options::overwrite_existing);
+      spdlog::info("wrote {}: the weights of epoch {}, the best val R@1 ({:.3f})", o.out.string(),
+                   stopper.best_epoch(), stopper.best());
+    } else {
+      save_model(model, o.out);
+      spdlog::info("wrote {} (the last epoch's weights)", o.out.string());
+    }
   }
   return stats;
 }
