@@ -197,7 +197,7 @@ int run(const RunArgs& args) {
   if (!args.keyframe_policy.empty()) config.tracker.keyframes.policy = args.keyframe_policy;
   if (!args.loop_detector.empty()) config.loop.detector = args.loop_detector;
   if ((config.loop.detector == "netvlad" || config.loop.detector == "hybrid") && !stillpoint::has_netvlad())
-    throw Error(pipeline::netvlad_unavailable_message());
+    throw Error(pipeline::netvlad_unavailable_message(config.loop.detector));
   InterruptWatcher interrupt;  // before any thread starts, so all threads inherit the blocked mask
   std::unique_ptr<io::FrameSource> source;
   std::optional<std::filesystem::path> groundtruth;

@@ -178,7 +178,7 @@ System::System(const Config& config) : impl_(std::make_unique<Impl>()) {
       throw Error("dynamic mode 'oracle' needs a sequence's boxes.txt: it is for the CLI's run only");
     if ((system_config.loop.detector == "netvlad" || system_config.loop.detector == "hybrid") &&
         !sp::pipeline::has_place_recognition())
-      throw Error(sp::pipeline::netvlad_unavailable_message());
+      throw Error(sp::pipeline::netvlad_unavailable_message(system_config.loop.detector));
     impl_->camera = config.camera_file.empty() ? to_internal(config.camera)
                                                : sp::io::load_camera_config(config.camera_file);
     sp::pipeline::SystemOptions options;

@@ -1,5 +1,7 @@
 #include "stillpoint/loop/hybrid_detector.hpp"
 
+#include <spdlog/spdlog.h>
+
 #include <algorithm>
 #include <limits>
 
@@ -55,6 +57,8 @@ std::vector<LoopCandidate> HybridLoopDetector::rerank(std::vector<LoopCandidate>
       if (q->second.size() != m->second.size()) throw Error("hybrid loop detector: descriptor sizes differ");
       d2 = static_cast<double>((q->second - m->second).squaredNorm());
       ++scored_pairs_;
+      spdlog::debug("hybrid: candidate {} -> {} (BoW score {:.3f}) descriptor d² {:.3f}{}", c.query, c.match,
+                    c.score, d2, d2 > params_.hybrid.max_distance_sq ? " vetoed" : "");
       if (d2 > params_.hybrid.max_distance_sq) {
         ++vetoed_;
         continue;

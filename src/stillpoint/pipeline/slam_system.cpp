@@ -36,8 +36,9 @@ bool has_place_recognition() {
 #endif
 }
 
-std::string netvlad_unavailable_message() {
-  return "loop detector 'netvlad' (ParC_NetVLAD) is not available: this StillPoint was built without "
+std::string netvlad_unavailable_message(const std::string& detector) {
+  return "loop detector '" + detector +
+         "' (ParC_NetVLAD) is not available: this StillPoint was built without "
          "libtorch (-DSTILLPOINT_WITH_TORCH=OFF); use loop_closing.detector bow-sequence or bow-keyframe, "
          "or rebuild with libtorch (Debian libtorch-dev)";
 }
@@ -159,7 +160,7 @@ void SlamSystem::attach_place_model([[maybe_unused]] const std::filesystem::path
   // Only the loop-closing thread calls it (the extractor is not thread-safe).
   closer_->set_global_describer([extractor](const cv::Mat& bgr) { return extractor->describe(bgr); });
 #else
-  throw Error(netvlad_unavailable_message());
+  throw Error(netvlad_unavailable_message(config_.loop.detector));
 #endif
 }
 

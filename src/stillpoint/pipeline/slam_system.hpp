@@ -41,7 +41,7 @@ struct FrameReport {
 // Whether this build has ParC_NetVLAD (libtorch): without it the 'netvlad' loop detector is refused.
 [[nodiscard]] bool has_place_recognition();
 // The message for a run that asks for 'netvlad' in a build without it.
-[[nodiscard]] std::string netvlad_unavailable_message();
+[[nodiscard]] std::string netvlad_unavailable_message(const std::string& detector = "netvlad");
 
 struct SystemOptions {
   bool deterministic = false;
