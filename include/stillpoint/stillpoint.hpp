@@ -55,7 +55,7 @@ STILLPOINT_API const char* version();
 // installed library. Throws Error when there is none.
 STILLPOINT_API std::filesystem::path data_dir();
 
-// Whether this build has ParC_NetVLAD (libtorch), i.e. the 'netvlad' loop detector.
+// Whether this build has ParC_NetVLAD (libtorch), i.e. the 'netvlad' and 'hybrid' loop detectors.
 STILLPOINT_API bool has_netvlad();
 
 // A pinhole RGB-D camera with radial-tangential (OpenCV) distortion.
@@ -81,7 +81,7 @@ struct STILLPOINT_API Config {
   std::filesystem::path camera_file;   // when set, the camera is read from it (any Camera::load format)
   // The paper's switches; empty keeps the file's value.
   std::string dynamic;          // off | flow | detector | detector+flow | auto
-  std::string loop_detector;    // off | bow-keyframe | bow-sequence | netvlad
+  std::string loop_detector;    // off | bow-keyframe | bow-sequence | netvlad | hybrid
   std::string keyframe_policy;  // heuristic | adaptive
   // Fixed seeds, every stage on the caller's thread: identical results twice (slower).
   bool deterministic = false;

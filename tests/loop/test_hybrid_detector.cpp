@@ -4,6 +4,7 @@
 #include <random>
 #include <set>
 
+#include "stillpoint/common/config_reader.hpp"
 #include "stillpoint/common/error.hpp"
 #include "stillpoint/loop/hybrid_detector.hpp"
 #include "synthetic_stream.hpp"
@@ -126,6 +127,56 @@ TEST(HybridLoopDetector, UndescribedCandidatesAreKeptAsBowFoundThem) {
   ASSERT_FALSE(a.candidates.empty());
   EXPECT_EQ(pairs(a.candidates), pairs(b.candidates));
   EXPECT_EQ(b.stats.descriptor_pairs, 0U);
+}
+
+// Keyframes without a descriptor (half of them here) yield candidates that BoW alone ranks: they come
+// after every described candidate of the same query, and are counted.
+TEST(HybridLoopDetector, UndescribedCandidatesComeAfterTheDescribedOnes) {
+  auto stream = make_stream(revisit_path(), 8, 11);
+  describe_by_place(stream, 5, 0.3f);
+  for (std::size_t k = 1; k < stream.keyframes.size(); k += 2) stream.keyframes[k].global.resize(0);
+  LoopDetectorParams p = hybrid_over("bow-keyframe");
+  p.min_consistency = 1;
+  auto hybrid = make_loop_detector("hybrid", p);
+  testing::TemporalView view(stream, 4);
+  std::size_t mixed = 0, undescribed = 0;
+  const auto described = [&](const LoopCandidate& c) {
+    return stream.keyframes[c.query.value()].global.size() > 0 &&
+           stream.keyframes[c.match.value()].global.size() > 0;
+  };
+  for (const auto& kf : stream.keyframes) {
+    view.set_newest(kf.id);
+    const auto cs = hybrid->detect(kf, view);
+    bool seen_undescribed = false, seen_described = false;
+    for (const auto& c : cs) {
+      if (!described(c)) {
+        seen_undescribed = true;
+        ++undescribed;
+      } else {
+        seen_described = true;
+        EXPECT_FALSE(seen_undescribed)
+            << "a described candidate after an undescribed one, keyframe " << kf.id.value();
+      }
+    }
+    if (seen_described && seen_undescribed) ++mixed;
+  }
+  EXPECT_GT(undescribed, 0U);
+  EXPECT_GT(mixed, 0U) << "no query mixed both kinds: the ordering was not exercised";
+  EXPECT_EQ(hybrid->stats().undescribed_candidates, undescribed);
+}
+
+// The YAML section loop_closing.detection.hybrid: keys, choices and ranges.
+TEST(HybridLoopDetector, ParamsFromYaml) {
+  const auto read = [](const std::string& text) {
+    return LoopDetectorParams::from_yaml(sp::ConfigReader::from_string(text, "test.yaml"));
+  };
+  const LoopDetectorParams p = read("method: hybrid\nhybrid:\n  bow: bow-keyframe\n  max_distance_sq: 0.8\n");
+  EXPECT_EQ(p.method, "hybrid");
+  EXPECT_EQ(p.hybrid.bow, "bow-keyframe");
+  EXPECT_DOUBLE_EQ(p.hybrid.max_distance_sq, 0.8);
+  EXPECT_EQ(read("method: hybrid\n").hybrid.bow, HybridParams{}.bow);
+  EXPECT_THROW(read("hybrid:\n  bow: netvlad\n"), sp::ConfigError);
+  EXPECT_THROW(read("hybrid:\n  max_distance_sq: 5\n"), sp::ConfigError);
 }
 
 TEST(HybridLoopDetector, ParamsAreValidated) {

@@ -326,5 +326,49 @@ TEST_F(LoopCloserTest, DetectsTheLoopFromTheKeyframeStreamAndClosesIt) {
   EXPECT_LT(max_keyframe_error(), 0.25 * before);
 }
 
+// A loaded map's keyframes are filed through add_existing_keyframes without a descriptor; with a learned
+// detector the closer describes their thumbnails, so the hybrid re-ranks candidates against them and the
+// loop back into the loaded part still closes.
+TEST_F(LoopCloserTest, KeyframesOfALoadedMapAreDescribedForTheHybridDetector) {
+  const auto vocabulary_file = std::filesystem::path(SP_SOURCE_DIR) / "data" / "vocab" / "stillpoint_orb.spv";
+  auto vocabulary = std::make_shared<const Vocabulary>(Vocabulary::load(vocabulary_file));
+  {
+    map::MapView view = map_.view();
+    for (map::KeyframeId id : ids_)
+      view.keyframe(id)->thumbnail = cv::Mat(24, 32, CV_8UC3, cv::Scalar::all(90));
+  }
+  LoopClosingConfig c;
+  c.detector = "hybrid";
+  c.detection.hybrid.bow = "bow-keyframe";
+  c.global_ba = false;
+  LoopCloser closer(map_, c, vocabulary, cam_, depth_, pyramid_, true);
+  ASSERT_TRUE(closer.needs_global_descriptors());
+  std::size_t described = 0;
+  closer.set_global_describer([&](const cv::Mat& bgr) {
+    EXPECT_FALSE(bgr.empty());
+    ++described;
+    return Eigen::VectorXf(Eigen::VectorXf::Ones(8).normalized());  // every place alike: nothing vetoed
+  });
+  // The first half is "loaded": BoW only, as SlamSystem files a loaded map.
+  const std::size_t loaded = ids_.size() / 2;
+  std::vector<KeyframeInfo> existing;
+  for (std::size_t i = 0; i < loaded; ++i) {
+    KeyframeInfo k;
+    k.id = ids_[i];
+    map::MapView view = map_.view();
+    k.R_cw = view.keyframe(k.id)->T_cw.rotation();
+    k.bow = vocabulary->transform(view.keyframe(k.id)->features.descriptors);
+    existing.push_back(std::move(k));
+  }
+  closer.add_existing_keyframes(existing);
+  EXPECT_EQ(described, loaded);
+  for (std::size_t i = loaded; i < ids_.size(); ++i) closer.process(ids_[i]);
+  EXPECT_EQ(described, ids_.size());
+  const LoopClosingStats s = closer.stats();
+  EXPECT_EQ(s.undescribed_candidates, 0u);
+  EXPECT_GT(s.candidates, 0u);
+  EXPECT_EQ(s.loops_closed, 1u);
+}
+
 }  // namespace
 }  // namespace sp::loop

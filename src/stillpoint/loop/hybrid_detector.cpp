@@ -3,6 +3,7 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <cmath>
 #include <limits>
 
 #include "stillpoint/common/error.hpp"
@@ -56,13 +57,18 @@ std::vector<LoopCandidate> HybridLoopDetector::rerank(std::vector<LoopCandidate>
     if (q != descriptors_.end() && m != descriptors_.end()) {
       if (q->second.size() != m->second.size()) throw Error("hybrid loop detector: descriptor sizes differ");
       d2 = static_cast<double>((q->second - m->second).squaredNorm());
-      ++scored_pairs_;
-      spdlog::debug("hybrid: candidate {} -> {} (BoW score {:.3f}) descriptor d² {:.3f}{}", c.query, c.match,
-                    c.score, d2, d2 > params_.hybrid.max_distance_sq ? " vetoed" : "");
-      if (d2 > params_.hybrid.max_distance_sq) {
-        ++vetoed_;
-        continue;
-      }
+    }
+    if (!std::isfinite(d2)) {  // no descriptor, or a broken one (NaN): BoW decides, after the described
+      ++undescribed_;
+      scored.emplace_back(kUndescribed, c);
+      continue;
+    }
+    ++scored_pairs_;
+    spdlog::debug("hybrid: candidate {} -> {} (BoW score {:.3f}) descriptor d² {:.3f}{}", c.query, c.match,
+                  c.score, d2, d2 > params_.hybrid.max_distance_sq ? " vetoed" : "");
+    if (d2 > params_.hybrid.max_distance_sq) {
+      ++vetoed_;
+      continue;
     }
     scored.emplace_back(d2, c);
   }
@@ -83,6 +89,7 @@ DetectorStats HybridLoopDetector::stats() const {
   s.candidates -= std::min(s.candidates, vetoed_);
   s.descriptor_pairs = scored_pairs_;
   s.vetoed_by_descriptor = vetoed_;
+  s.undescribed_candidates = undescribed_;
   return s;
 }
 

@@ -7,7 +7,8 @@
 //  * Candidates come from an inner "bow-keyframe" or "bow-sequence" detector, unchanged.
 //  * Each is scored by d² between the descriptors of its query keyframe and its match (L2-normalised,
 //    so d² is in [0, 4]); candidates with d² > max_distance_sq are dropped, the rest sorted by d².
-//  * A candidate whose keyframes have no descriptor is kept, after the described ones (BoW decides).
+//  * A candidate whose keyframes have no (finite) descriptor is kept, after the described ones (BoW
+//    decides), and counted in DetectorStats::undescribed_candidates.
 #include <memory>
 #include <mutex>
 #include <unordered_map>
@@ -39,6 +40,7 @@ class HybridLoopDetector final : public LoopDetector {
   std::unordered_map<KeyframeId, Eigen::VectorXf> descriptors_;
   std::size_t scored_pairs_ = 0;
   std::size_t vetoed_ = 0;
+  std::size_t undescribed_ = 0;
 };
 
 }  // namespace sp::loop

@@ -116,13 +116,27 @@ LoopClosingStats LoopCloser::stats() const {
     const DetectorStats d = detector_->stats();
     s.queries = d.queries;
     s.vetoed_by_descriptor = d.vetoed_by_descriptor;
+    s.undescribed_candidates = d.undescribed_candidates;
   }
   return s;
 }
 
 void LoopCloser::add_existing_keyframes(const std::vector<KeyframeInfo>& keyframes) {
   if (!detector_) return;
-  for (const KeyframeInfo& kf : keyframes) detector_->add_keyframe(kf);
+  for (KeyframeInfo kf : keyframes) {
+    // A loaded map's keyframes keep their thumbnails: describe them, or the learned detectors could
+    // never close a loop against the loaded map (netvlad ignores them, hybrid cannot re-rank them).
+    if (needs_global_descriptors() && describe_ && kf.global.size() == 0) {
+      cv::Mat thumbnail;
+      {
+        map::MapView view = map_.view();
+        const map::Keyframe* k = view.keyframe(kf.id);
+        if (k != nullptr && !k->bad) thumbnail = k->thumbnail.clone();
+      }
+      if (!thumbnail.empty()) kf.global = describe_(thumbnail);
+    }
+    detector_->add_keyframe(kf);
+  }
 }
 
 void LoopCloser::erase_keyframes(const std::vector<map::KeyframeId>& keyframes) {

@@ -53,6 +53,7 @@ struct LoopClosingStats {
   double verification_lock_ms_total = 0;   // of which the map lock was held (copy in, counters out)
   std::size_t queries = 0;                 // database queries made by the detector
   std::size_t vetoed_by_descriptor = 0;    // hybrid detector: BoW candidates dropped by descriptor distance
+  std::size_t undescribed_candidates = 0;  // hybrid detector: candidates passed on unranked (no descriptor)
   double detection_ms_total = 0;           // candidate search in the database (not BoW, not verification)
   double bow_ms_total = 0;                 // BoW conversion of the keyframes
   double global_ms_total = 0;              // global (ParC_NetVLAD) descriptors of the keyframes
@@ -92,7 +93,8 @@ class LoopCloser {
   // Handles one new keyframe (called in keyframe order by the loop-closing stage).
   void process(map::KeyframeId keyframe);
   // Files the keyframes of a loaded map (BoW already computed, in id order) without detection, so
-  // new keyframes can close loops against them. Call before the first process().
+  // new keyframes can close loops against them; with netvlad or hybrid their thumbnails are described
+  // here (set_global_describer first). Call before the first process().
   void add_existing_keyframes(const std::vector<KeyframeInfo>& keyframes);
   // End of run: queries what the detector still holds (the open sequence), then waits for a
   // running global BA.

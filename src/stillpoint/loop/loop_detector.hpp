@@ -52,6 +52,8 @@ struct DetectorStats {
   std::size_t candidates = 0;            // loop candidates returned
   std::size_t descriptor_pairs = 0;      // hybrid: candidates scored by global-descriptor distance
   std::size_t vetoed_by_descriptor = 0;  // hybrid: BoW candidates dropped as too far in descriptor space
+  std::size_t undescribed_candidates =
+      0;  // hybrid: candidates passed on unranked (a keyframe without descriptor)
 };
 
 class LoopDetector {

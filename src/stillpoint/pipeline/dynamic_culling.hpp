@@ -33,7 +33,8 @@ struct DynamicConfig {
   // to the model's defaults only; a `detector` section sets its own conf_threshold.
   double detector_min_score = 0.25;
   // Boxes that do not reach the image border need at least this score (0 = detector_min_score alone).
-  // The low threshold is for people cut by the image edge; one in full view scores higher.
+  // Meant for people cut by the image edge, but people in full view score as low: on the tune rooms it
+  // cost recall and ATE, so it is off (docs/dynamic.md). Model defaults only, like detector_min_score.
   double detector_min_score_interior = 0.0;
   // Scheduling niceness of the detector thread (0 = as tracking). 2 keeps tracking within +5 ms of
   // culling-off on 2 cores; 5 and more starve the detector and stale boxes cost accuracy (docs/dynamic.md).

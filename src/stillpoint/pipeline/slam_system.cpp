@@ -536,6 +536,7 @@ nlohmann::json SlamSystem::statistics() {
     if (closer_->needs_global_descriptors()) {
       j["loop_global_descriptor_ms_total"] = ls.global_ms_total;
       j["loop_candidates_vetoed_by_descriptor"] = ls.vetoed_by_descriptor;
+      j["loop_candidates_undescribed"] = ls.undescribed_candidates;
       j["place_model_load_ms"] = place_model_load_ms_;
     }
     j["loop_verifications"] = ls.verifications;
