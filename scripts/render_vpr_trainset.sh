@@ -18,14 +18,23 @@ N=40
 JOBS=1
 COUNT=400
 pos=()
+usage_error() {
+  echo "render_vpr_trainset.sh: $1" >&2
+  echo "usage: scripts/render_vpr_trainset.sh [OUT_DIR] [N_ROOMS] [--jobs K] [--count VIEWS]" >&2
+  exit 2
+}
 while (($#)); do
   case $1 in
-    --jobs) JOBS=$2; shift 2 ;;
-    --count) COUNT=$2; shift 2 ;;
+    --jobs|--count)
+      (($# >= 2)) || usage_error "$1 needs a value"
+      if [[ $1 == --jobs ]]; then JOBS=$2; else COUNT=$2; fi
+      shift 2 ;;
     -h|--help) sed -n '2,12p' "$0"; exit 0 ;;
+    -?*) usage_error "unknown option $1" ;;
     *) pos+=("$1"); shift ;;
   esac
 done
+((${#pos[@]} <= 2)) || usage_error "too many arguments (${pos[*]:2}): at most OUT_DIR and N_ROOMS"
 ((${#pos[@]} > 0)) && OUT=${pos[0]}
 ((${#pos[@]} > 1)) && N=${pos[1]}
 if ! [[ $N =~ ^[0-9]+$ ]] || ((N < 1 || N > 800)); then echo "N_ROOMS must be 1..800 (seeds 1001..1899)" >&2; exit 2; fi
@@ -66,23 +75,26 @@ render() {  # seed out_dir people(0|1)
   nice -n 10 $PY "$D" places --scene random --scene-seed "$seed" --count "$COUNT" --seed 1 \
       --width 320 --height 240 --out "$dir.tmp" "${people[@]}" >"$dir.log" 2>&1 \
     || { echo "FAILED $dir (see $dir.log)" >&2; rm -rf "$dir.tmp"; return 1; }
-  mv "$dir.tmp" "$dir"
+  # A $dir without poses.txt (an empty or half-copied folder) is replaced, never rendered into: plain
+  # `mv` would move the render inside it. -T: treat $dir as the target name, not a folder to move into.
+  rm -rf "$dir"
+  mv -T "$dir.tmp" "$dir"
   echo "rendered $dir"
 }
 
 mkdir -p "$OUT/train" "$OUT/val"
-jobs_list=()
+# One entry per room in three parallel arrays (OUT_DIR may contain spaces: no word splitting).
+job_seed=() job_dir=() job_people=()
 for s in $TRAIN_SEEDS; do
-  jobs_list+=("$s $OUT/train/random_$s $((s % 2 == 0 ? 1 : 0))")
+  job_seed+=("$s") job_dir+=("$OUT/train/random_$s") job_people+=($((s % 2 == 0 ? 1 : 0)))
 done
-for s in $VAL_SEEDS; do jobs_list+=("$s $OUT/val/random_$s 1"); done
+for s in $VAL_SEEDS; do job_seed+=("$s") job_dir+=("$OUT/val/random_$s") job_people+=(1); done
 
 # K renders at a time; the first failure is reported at the end (the others still finish).
 fail=0
 running=0
-for j in "${jobs_list[@]}"; do
-  # shellcheck disable=SC2086
-  render $j &
+for i in "${!job_seed[@]}"; do
+  render "${job_seed[i]}" "${job_dir[i]}" "${job_people[i]}" &
   running=$((running + 1))
   if ((running >= JOBS)); then
     wait -n || fail=1

@@ -4,8 +4,10 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdint>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -152,6 +154,43 @@ TEST(PlaceSchedule, ConstantAndStep) {
   st.warmup_epochs = 1;
   EXPECT_DOUBLE_EQ(learning_rate(st, 1.0, 11, 4, 9), 1.0);  // 0-based epoch 2 = 1st after warm-up
   EXPECT_DOUBLE_EQ(learning_rate(st, 1.0, 12, 4, 9), 0.5);
+}
+
+TEST(PlaceSchedule, FractionalWarmupNeverExceedsTheBaseRate) {
+  // Warm-ups that are not a whole number of steps: 0.5 epochs × 3 steps = 1.5 steps (uncapped, step 1
+  // would be 2/1.5 = 1.33× base), 0.1 × 2 = 0.2 steps (uncapped: 5× base), 1.25 × 3 = 3.75 steps.
+  struct Case {
+    double warmup;
+    std::int64_t spe;
+  };
+  for (const auto kind : {LrScheduleKind::Constant, LrScheduleKind::Cosine, LrScheduleKind::Step}) {
+    for (const Case c : {Case{0.5, 3}, Case{0.1, 2}, Case{1.25, 3}, Case{0.7, 10}}) {
+      LrSchedule s;
+      s.kind = kind;
+      s.warmup_epochs = c.warmup;
+      const double base = 0.3;
+      const int epochs = 6;
+      double previous = 0;
+      for (std::int64_t k = 0; k < c.spe * epochs; ++k) {
+        const double lr = learning_rate(s, base, k, c.spe, epochs);
+        EXPECT_LE(lr, base) << to_string(kind) << " warm-up " << c.warmup << " × " << c.spe << " step " << k;
+        EXPECT_GT(lr, 0.0);
+        // Within the warm-up the ramp rises (or reaches the base rate).
+        if (static_cast<double>(k) < c.warmup * static_cast<double>(c.spe)) {
+          EXPECT_GE(lr, previous) << k;
+        }
+        previous = lr;
+      }
+    }
+  }
+  LrSchedule s;
+  s.kind = LrScheduleKind::Constant;
+  s.warmup_epochs = 0.5;
+  EXPECT_DOUBLE_EQ(learning_rate(s, 1.0, 0, 3, 4), 1.0 / 1.5);
+  EXPECT_DOUBLE_EQ(learning_rate(s, 1.0, 1, 3, 4), 1.0);  // the last, partial warm-up step: capped
+  EXPECT_DOUBLE_EQ(learning_rate(s, 1.0, 2, 3, 4), 1.0);
+  s.warmup_epochs = 0.1;
+  EXPECT_DOUBLE_EQ(learning_rate(s, 1.0, 0, 2, 4), 1.0);  // was 5× base
 }
 
 TEST(PlaceSchedule, ParseValidateAndEarlyStopping) {
@@ -338,6 +377,70 @@ TEST(PlaceConvergence, ResumeContinuesTheScheduleAndTheLog) {
   ASSERT_EQ(log.size(), 3u);
   EXPECT_EQ(log[0]["epoch"].get<int>(), 1);
   EXPECT_EQ(log[2]["epoch"].get<int>(), 3);
+}
+
+TEST(PlaceConvergence, ResumeIntoAnotherOutKeepsTheBestAndTheLog) {
+  // A (2 epochs) → --resume A.ckpt --out B (epoch 3) → --resume B.ckpt --out C (epoch 4). lr 0: the
+  // val recall never improves after epoch 1, so B and C never write a .best of their own and must
+  // carry A's; their logs must keep the earlier runs' rows.
+  const fs::path dir = fs::path(SP_TEST_TMP_DIR) / "place_conv" / "chain";
+  fs::remove_all(dir);
+  const auto options = [&](const std::string& name, int epochs) {
+    TrainOptions o = micro_options(dir / name);
+    o.lr = 0;
+    o.epochs = epochs;
+    o.val = {val_root()};
+    return o;
+  };
+  train_model(options("a.pt", 2));
+  TrainOptions b = options("b.pt", 3);
+  b.resume = dir / "a.pt.ckpt";
+  ASSERT_EQ(train_model(b).size(), 1u);
+  ASSERT_TRUE(fs::exists(dir / "b.pt.ckpt.best")) << "B.ckpt.epoch names a best epoch B has no weights of";
+  TrainOptions c = options("c.pt", 4);
+  c.resume = dir / "b.pt.ckpt";
+  ASSERT_EQ(train_model(c).size(), 1u);  // used to throw: b.pt.ckpt.best missing
+  std::ifstream st(dir / "c.pt.ckpt.epoch");
+  int last = 0, best = 0;
+  st >> last >> best;
+  EXPECT_EQ(last, 4);
+  EXPECT_EQ(best, 1);
+  EXPECT_EQ(max_weight_diff(dir / "c.pt", dir / "a.pt.ckpt.best"), 0.0);
+  for (const char* name : {"b.pt", "c.pt"}) {
+    const auto log = read_training_log(dir / name);
+    ASSERT_EQ(log.size(), std::string(name) == "b.pt" ? 3u : 4u) << name;
+    for (size_t i = 0; i < log.size(); ++i) EXPECT_EQ(log[i].epoch, static_cast<int>(i) + 1) << name;
+  }
+  // The checkpoint files were renamed into place: no .tmp left behind.
+  for (const auto& e : fs::directory_iterator(dir)) EXPECT_NE(e.path().extension(), ".tmp") << e.path();
+}
+
+TEST(PlaceTrainingLog, NanLossReadsBackAsNaN) {
+  const fs::path out = fs::path(SP_TEST_TMP_DIR) / "place_conv" / "nan_log" / "m.pt";
+  fs::remove_all(out.parent_path());
+  std::vector<EpochStats> rows(2);
+  rows[0].epoch = 1;
+  rows[0].loss = 0.25;
+  rows[0].lr = 1e-3;
+  rows[1].epoch = 2;
+  rows[1].loss = std::numeric_limits<double>::quiet_NaN();  // a diverged epoch
+  rows[1].lr = 1e-3;
+  RecallResult v;
+  v.recall = {0.5, 0.75, 1.0, 1.0};
+  rows[1].val = v;
+  write_training_log(out, rows);
+  // JSON has no NaN: nlohmann writes null, which used to make the log (and so --resume) unreadable.
+  const auto j = nlohmann::json::parse(std::ifstream(out.string() + ".log.json"));
+  ASSERT_TRUE(j[1]["loss"].is_null());
+  const auto back = read_training_log(out);
+  ASSERT_EQ(back.size(), 2u);
+  EXPECT_DOUBLE_EQ(back[0].loss, 0.25);
+  EXPECT_TRUE(std::isnan(back[1].loss));
+  EXPECT_DOUBLE_EQ(back[1].lr, 1e-3);
+  ASSERT_TRUE(back[1].val.has_value());
+  EXPECT_DOUBLE_EQ(back[1].val->recall[1], 0.75);
+  EXPECT_FALSE(back[0].val.has_value());
+  EXPECT_FALSE(fs::exists(out.string() + ".log.json.tmp"));
 }
 
 TEST(PlaceConvergence, RefusesValRoomsThatAreTrainedOn) {

@@ -1,6 +1,7 @@
 // Data-parallel training over libtorch's c10d (Gloo over a TCPStore on 127.0.0.1). Rank 1 runs in a
 // child process (this test binary re-run on the disabled test below), so a rank can really die.
 #include <arpa/inet.h>
+#include <fmt/format.h>
 #include <gtest/gtest.h>
 #include <netinet/in.h>
 #include <signal.h>
@@ -113,7 +114,7 @@ pid_t spawn_rank1(const TrainOptions& o, const fs::path& out) {
   env.push_back("SP_DDP_EPOCHS=" + std::to_string(o.epochs));
   env.push_back("SP_DDP_BATCH=" + std::to_string(o.batch));
   env.push_back("SP_DDP_QUERIES=" + std::to_string(o.queries_per_epoch));
-  env.push_back("SP_DDP_LR=" + std::to_string(o.lr));
+  env.push_back("SP_DDP_LR=" + fmt::format("{:.17g}", o.lr));  // exact: --lr is compared over ranks
   env.push_back("SP_DDP_PATIENCE=" + std::to_string(o.patience));
   if (!o.val.empty()) env.push_back("SP_DDP_VAL=" + o.val.front().string());
   std::vector<char*> envp;

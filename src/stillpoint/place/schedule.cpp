@@ -44,7 +44,9 @@ double learning_rate(const LrSchedule& s, double base_lr, std::int64_t step, std
   const double warm = s.warmup_epochs * spe;
   const double k = static_cast<double>(step);
   // (k + 1) / warm: the first step already moves (a zero rate would waste it), the last reaches base.
-  if (k < warm) return base_lr * (k + 1) / warm;
+  // Capped at 1: when the warm-up is not a whole number of steps (0.5 epochs of 3 steps), the last
+  // warm-up step has k + 1 > warm and would otherwise overshoot the base rate.
+  if (k < warm) return base_lr * std::min(1.0, (k + 1) / warm);
   const double after = k - warm;  // steps since the warm-up ended
   const double span = std::max(1.0, total - warm);
   switch (s.kind) {

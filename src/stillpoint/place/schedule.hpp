@@ -26,8 +26,11 @@ void validate(const LrSchedule& s);
 
 // Learning rate of optimiser step `step` (0-based, counted over the whole run, i.e. across epochs) when
 // every epoch has `steps_per_epoch` steps and the run `epochs` epochs. Per step: the warm-up ramp and
-// the cosine are smooth within an epoch; the step schedule decays at epoch boundaries. Depends on
-// nothing else, so a run resumed after epoch e continues with step e·steps_per_epoch exactly.
+// the cosine are smooth within an epoch, and the rate never exceeds base_lr. The step schedule decays
+// every `step_epochs` epochs counted from the end of the warm-up, i.e. at the first step at or after
+// warmup_epochs + n·step_epochs epochs: on epoch boundaries only when warmup_epochs is a whole number
+// (a fractional warm-up, e.g. 0.5, moves every decay into the middle of an epoch). Depends on nothing
+// else, so a run resumed after epoch e continues with step e·steps_per_epoch exactly.
 [[nodiscard]] double learning_rate(const LrSchedule& s, double base_lr, std::int64_t step,
                                    std::int64_t steps_per_epoch, int epochs);
 

@@ -72,7 +72,9 @@ torch::Tensor normalise(const torch::Tensor& u8) {
   return (u8.to(torch::kFloat32).div(255.0) - mean) / std;
 }
 
-// Every image resized to the model input, RGB, uint8 (N,3,H,W): a few hundred MB at most.
+// Every image resized to the model input, RGB, uint8 (N,3,H,W), held in memory on every rank:
+// 3·H·W bytes per image, 230 KB at 240×320, so the full training set of 40 rooms × 400 views
+// (16 000 images) takes about 3.7 GB per rank (plus the val images).
 torch::Tensor load_images(const std::vector<fs::path>& files, int h, int w, bool progress, const char* what) {
   auto store = torch::empty({static_cast<int64_t>(files.size()), 3, h, w}, torch::kUInt8);
   sp::ProgressBar bar(what, files.size(), progress);
@@ -323,10 +325,27 @@ CheckpointState read_checkpoint_state(const fs::path& ckpt) {
   return c;
 }
 
-void write_checkpoint_state(const fs::path& ckpt, const CheckpointState& c) {
-  std::ofstream st(ckpt.string() + ".epoch");
+// Checkpoint files are written to <file>.tmp first and renamed into place once all of them are
+// written, <ckpt>.epoch last: a kill while writing leaves the previous complete set (plus stray .tmp
+// files, overwritten next time), and .epoch never names an epoch whose weights are not in place.
+fs::path tmp_path(const fs::path& file) { return file.string() + ".tmp"; }
+
+void write_checkpoint_state(const fs::path& file, const CheckpointState& c) {
+  std::ofstream st(file);
   st << c.epoch << "\n";
   if (c.best_epoch > 0) st << c.best_epoch << " " << std::setprecision(17) << c.best_r1 << "\n";
+  st.close();
+  if (!st) throw sp::Error("cannot write the checkpoint state " + file.string());
+}
+
+// The log of the run being resumed: named after its --out, i.e. the checkpoint path without the
+// ".ckpt" that train_model appends. A checkpoint named otherwise: this run's --out (no other guess).
+fs::path resumed_log_base(const fs::path& resume, const fs::path& out) {
+  const std::string r = resume.string();
+  const std::string suffix = ".ckpt";
+  if (r.size() > suffix.size() && r.compare(r.size() - suffix.size(), suffix.size(), suffix) == 0)
+    return r.substr(0, r.size() - suffix.size());
+  return out;
 }
 
 }  // namespace
@@ -367,12 +386,24 @@ std::vector<EpochStats> train_model(const TrainOptions& o) {
   // Best-epoch bookkeeping (only with --val). The best weights live in <ckpt>.best; a resumed run
   // starts from the checkpoint's record and its .best file.
   EarlyStopping stopper(o.patience);
-  fs::path best_file = ckpt.string() + ".best";
+  const fs::path best_file = ckpt.string() + ".best";
   if (!val.sets.empty() && resumed.best_epoch > 0) {
     stopper.restore(resumed.best_r1, resumed.best_epoch);
-    best_file = o.resume.string() + ".best";
-    if (lead && !fs::exists(best_file))  // only rank 0 writes the model
-      throw sp::InputError(best_file.string(), 0, "the best epoch's weights of the resumed run are missing");
+    const fs::path resumed_best = o.resume.string() + ".best";
+    // Checked on every rank (all of them read o.resume): a throw on rank 0 alone would leave the
+    // others waiting in the weight broadcast below until the timeout.
+    if (!fs::exists(resumed_best))
+      throw sp::InputError(resumed_best.string(), 0,
+                           "the best epoch's weights of the resumed run are missing");
+    // This run's <ckpt>.epoch will record the resumed best epoch, so its <ckpt>.best must hold those
+    // weights even if no later epoch beats them (else a second --resume of this --out would fail).
+    // Rank 0 only, like every write: should the copy throw, the other ranks wait in the broadcast
+    // below until the timeout (see the end-of-epoch writes).
+    if (lead && !(fs::exists(best_file) && fs::equivalent(resumed_best, best_file))) {
+      if (ckpt.has_parent_path()) fs::create_directories(ckpt.parent_path());
+      fs::copy_file(resumed_best, tmp_path(best_file), fs::copy_options::overwrite_existing);
+      fs::rename(tmp_path(best_file), best_file);
+    }
   }
   if (o.resume.empty() && lead) init_centroids(model, store, o.kmeans_images, rng);
   // Every rank starts from rank 0's weights (random init and k-means centroids alike).
@@ -393,11 +424,13 @@ std::vector<EpochStats> train_model(const TrainOptions& o) {
   const auto params = model->parameters();
   int64_t n_params = 0;
   for (const auto& p : params) n_params += p.numel();
+  const auto& aug = o.augment;
   check_same_on_all_ranks(pg, {{"the image count", static_cast<double>(imgs.size())},
                                {"the query count", static_cast<double>(mining.queries.size())},
                                {"the parameter count", static_cast<double>(n_params)},
                                {"the resumed epoch", start_epoch},
                                {"the resumed best val epoch", stopper.best_epoch()},
+                               {"the resumed best val R@1", stopper.best()},
                                {"whether an optimiser state was resumed", optim_loaded ? 1.0 : 0.0},
                                {"the val image count", val.store.defined() ? val.store.size(0) : 0.0},
                                {"--epochs", o.epochs},
@@ -406,9 +439,22 @@ std::vector<EpochStats> train_model(const TrainOptions& o) {
                                {"--negatives", o.negatives},
                                {"--refresh-every", o.refresh_every},
                                {"--patience", o.patience},
-                               {"--augment", o.augment.enabled ? 1.0 : 0.0},
+                               {"--lr", o.lr},
+                               {"--margin", o.margin},
                                {"--lr-schedule", static_cast<double>(o.lr_schedule.kind)},
                                {"--warmup-epochs", o.lr_schedule.warmup_epochs},
+                               {"--lr-gamma", o.lr_schedule.step_gamma},
+                               {"--lr-step-epochs", o.lr_schedule.step_epochs},
+                               {"the cosine's final factor", o.lr_schedule.final_factor},
+                               {"--augment", aug.enabled ? 1.0 : 0.0},
+                               {"the augmentation's brightness range", aug.brightness},
+                               {"the augmentation's contrast range", aug.contrast},
+                               {"the augmentation's saturation range", aug.saturation},
+                               {"the augmentation's gamma range", aug.gamma},
+                               {"the augmentation's blur probability", aug.blur_probability},
+                               {"the augmentation's largest blur sigma", aug.blur_sigma_max},
+                               {"the augmentation's largest noise sigma", aug.noise_sigma_max},
+                               {"the augmentation's largest crop", aug.crop_max},
                                {"--seed", static_cast<double>(o.seed)}});
 
   // One step consumes `batch` queries on each rank: rank r takes [b + r·batch, b + (r+1)·batch).
@@ -422,11 +468,13 @@ std::vector<EpochStats> train_model(const TrainOptions& o) {
                  o.augment.enabled ? "on" : "off",
                  val.sets.empty() ? std::string("off")
                                   : fmt::format("on ({} sets, patience {})", val.sets.size(), o.patience));
-  // The log keeps the epochs of the run this one resumes (rows up to the resumed epoch).
+  // The log keeps the epochs of the run this one resumes (rows up to the resumed epoch), read from
+  // that run's log (<resume> without ".ckpt"), which differs from this run's when --out changed. Read
+  // on every rank, so that an unreadable log fails them all before the first collective.
   std::vector<EpochStats> log_rows;
-  if (lead && start_epoch > 0) {
-    for (const auto& r : read_training_log(o.out))
-      if (r.epoch <= start_epoch) log_rows.push_back(r);
+  if (start_epoch > 0) {
+    for (const auto& r : read_training_log(resumed_log_base(o.resume, o.out)))
+      if (r.epoch <= start_epoch && lead) log_rows.push_back(r);
   }
   std::vector<EpochStats> stats;
   for (int epoch = start_epoch + 1; epoch <= o.epochs; ++epoch) {
@@ -578,18 +626,29 @@ std::vector<EpochStats> train_model(const TrainOptions& o) {
     }
     stats.push_back(es);
     const bool stop = stopper.stop(epoch);  // identical on every rank: from broadcast figures
-    if (lead) {                             // the other ranks hold identical weights: one writer is enough
+    // The other ranks hold identical weights: one writer is enough. Failure mode: if a write here
+    // throws on rank 0 (disk full, permissions), the other ranks do not know and wait in the next
+    // collective (the cache refresh or the validation) until the process-group timeout, then fail
+    // with a generic "lost a rank" error; rank 0's own message is the one that names the cause.
+    if (lead) {
       spdlog::info("epoch {}: loss {:.4f}, active negatives {:.1f} %, lr {:.3g}, {:.0f} s", epoch, es.loss,
                    100 * es.active, es.lr, es.seconds);
-      save_model(model, ckpt);
-      torch::save(*opt, ckpt.string() + ".optim");
-      if (improved) {
-        best_file = ckpt.string() + ".best";
-        save_model(model, best_file);
-      }
-      write_checkpoint_state(ckpt, {epoch, stopper.best_epoch(), stopper.best()});
+      // Everything to .tmp files first (the slow part), then renamed into place back to back, .epoch
+      // last: a kill while writing leaves the previous epoch's complete set; only a kill between the
+      // renames (microseconds) could mix two epochs.
+      const fs::path epoch_file = ckpt.string() + ".epoch", optim_file = ckpt.string() + ".optim";
+      save_model(model, tmp_path(ckpt));
+      torch::save(*opt, tmp_path(optim_file).string());
+      if (improved) save_model(model, tmp_path(best_file));
+      write_checkpoint_state(tmp_path(epoch_file), {epoch, stopper.best_epoch(), stopper.best()});
+      // The log before the renames: a resumed run keeps only the rows up to the epoch .epoch names,
+      // so a row of an epoch whose checkpoint never landed is dropped.
       log_rows.push_back(es);
       write_training_log(o.out, log_rows);
+      fs::rename(tmp_path(ckpt), ckpt);
+      fs::rename(tmp_path(optim_file), optim_file);
+      if (improved) fs::rename(tmp_path(best_file), best_file);
+      fs::rename(tmp_path(epoch_file), epoch_file);
     }
     if (stop) {
       if (lead)

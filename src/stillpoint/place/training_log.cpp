@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <fstream>
+#include <limits>
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -26,6 +27,13 @@ double nice_ceiling(double v) {
   for (double m : {1.0, 2.0, 5.0, 10.0})
     if (m * p >= v) return m * p;
   return 10 * p;
+}
+
+// A numeric field of a log row. nlohmann writes NaN and ±inf as null (a diverged epoch's loss), so
+// null reads back as NaN rather than refusing the whole log.
+double number(const nlohmann::json& row, const char* key) {
+  const auto& v = row.at(key);
+  return v.is_null() ? std::numeric_limits<double>::quiet_NaN() : v.get<double>();
 }
 
 }  // namespace
@@ -50,7 +58,15 @@ void write_training_log(const fs::path& out, const std::vector<EpochStats>& rows
     }
     j.push_back(std::move(row));
   }
-  std::ofstream(with_suffix(out, ".log.json")) << j.dump(2) << "\n";
+  // Via a .tmp file: a resumed run reads this one back, and a kill mid-write must not truncate it.
+  const fs::path json = with_suffix(out, ".log.json"), json_tmp = with_suffix(out, ".log.json.tmp");
+  {
+    std::ofstream f(json_tmp);
+    f << j.dump(2) << "\n";
+    f.close();
+    if (!f) throw sp::Error("cannot write the training log " + json_tmp.string());
+  }
+  fs::rename(json_tmp, json);
   const fs::path png = with_suffix(out, ".curve.png");
   if (!cv::imwrite(png.string(), draw_training_curve(rows)))
     throw sp::Error("cannot write the training curve " + png.string());
@@ -66,15 +82,16 @@ std::vector<EpochStats> read_training_log(const fs::path& out) {
     for (const auto& r : j) {
       EpochStats s;
       s.epoch = r.at("epoch").get<int>();
-      s.loss = r.at("loss").get<double>();
-      s.active = r.at("active").get<double>();
-      s.lr = r.value("lr", 0.0);
-      s.seconds = r.at("seconds").get<double>();
+      s.loss = number(r, "loss");
+      s.active = number(r, "active");
+      s.lr = r.contains("lr") ? number(r, "lr") : 0.0;
+      s.seconds = number(r, "seconds");
+      // A null val_r1 means no validation that epoch (it cannot be NaN: a recall is a ratio of counts).
       if (r.contains("val_r1") && !r["val_r1"].is_null()) {
         RecallResult v;
-        v.recall[0] = r["val_r1"].get<double>();
-        v.recall[1] = r.at("val_r5").get<double>();
-        v.recall[2] = r.at("val_r10").get<double>();
+        v.recall[0] = number(r, "val_r1");
+        v.recall[1] = number(r, "val_r5");
+        v.recall[2] = number(r, "val_r10");
         s.val = v;
       }
       rows.push_back(s);

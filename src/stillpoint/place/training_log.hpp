@@ -13,7 +13,8 @@ namespace sp::place {
 // Writes all three files (overwriting); `out` is the model path they are named after.
 void write_training_log(const std::filesystem::path& out, const std::vector<EpochStats>& rows);
 
-// Rows of an existing <out>.log.json (for a resumed run); empty when the file does not exist.
+// Rows of an existing <out>.log.json (for a resumed run); empty when the file does not exist. A null
+// loss, active, lr or seconds (how the JSON holds a NaN or infinite value) reads back as NaN.
 // Throws sp::InputError when it exists but is not a training log.
 std::vector<EpochStats> read_training_log(const std::filesystem::path& out);
 
