@@ -261,6 +261,11 @@ void add_vpr_command(CLI::App& app) {
   train->add_option("--negative-pool", ta->o.negative_pool)
       ->check(CLI::Range(1, 100000))
       ->capture_default_str();
+  train
+      ->add_option("--negative-distance", ta->o.rules.negative_distance,
+                   "m: a view of the same room counts as a negative beyond this (another room always does)")
+      ->check(CLI::Range(0.5, 1e6))
+      ->capture_default_str();
   train->add_option("--queries-per-epoch", ta->o.queries_per_epoch)
       ->check(CLI::Range(1, 1000000))
       ->capture_default_str();
