@@ -266,6 +266,11 @@ void add_vpr_command(CLI::App& app) {
                    "m: a view of the same room counts as a negative beyond this (another room always does)")
       ->check(CLI::Range(0.5, 1e6))
       ->capture_default_str();
+  train
+      ->add_option("--negative-min-angle", ta->o.rules.negative_min_angle_deg,
+                   "deg: same-room negatives must also be rotated this much (0: distance alone)")
+      ->check(CLI::Range(0.0, 180.0))
+      ->capture_default_str();
   train->add_option("--queries-per-epoch", ta->o.queries_per_epoch)
       ->check(CLI::Range(1, 1000000))
       ->capture_default_str();

@@ -61,9 +61,17 @@ TEST(PlaceRetrieval, PositiveAndNegativeRules) {
   EXPECT_FALSE(is_negative(a, b, rules));
   b.t = Eigen::Vector3d(3.5, 0, 0);
   EXPECT_TRUE(is_negative(a, b, rules));
+  PlaceRules view_aware;
+  view_aware.negative_min_angle_deg = 60;
+  EXPECT_FALSE(is_negative(a, b, view_aware)) << "3.5 m back, 35 deg apart: may see the same wall";
+  b.q = Eigen::Quaterniond(Eigen::AngleAxisd(90.0 * M_PI / 180, Eigen::Vector3d::UnitY()));
+  EXPECT_TRUE(is_negative(a, b, view_aware));
+  b.t = Eigen::Vector3d(2.0, 0, 0);
+  EXPECT_FALSE(is_negative(a, b, view_aware)) << "within the negative distance";
   b.t.setZero();
   b.room = "other";
   EXPECT_TRUE(is_negative(a, b, rules));
+  EXPECT_TRUE(is_negative(a, b, view_aware));
   EXPECT_FALSE(is_positive(a, b, rules));
 }
 

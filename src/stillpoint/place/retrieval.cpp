@@ -70,7 +70,9 @@ bool is_positive(const PlaceImage& a, const PlaceImage& b, const PlaceRules& r) 
 }
 
 bool is_negative(const PlaceImage& a, const PlaceImage& b, const PlaceRules& r) {
-  return a.room != b.room || (a.t - b.t).norm() > r.negative_distance;
+  if (a.room != b.room) return true;
+  if ((a.t - b.t).norm() <= r.negative_distance) return false;
+  return r.negative_min_angle_deg <= 0 || rotation_angle_deg(a.q, b.q) > r.negative_min_angle_deg;
 }
 
 namespace {

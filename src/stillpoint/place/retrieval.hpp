@@ -24,6 +24,9 @@ struct PlaceRules {
   double positive_distance = 0.5;  // m, same room
   double positive_angle_deg = 30;  // degrees of relative rotation
   double negative_distance = 3.0;  // m, or another room
+  // Same-room negatives also need this much relative rotation (0: distance alone). A view farther
+  // back along the same line sees the same wall: without it, hard mining picks such false negatives.
+  double negative_min_angle_deg = 0;
 };
 
 // Reads poses.txt ("rgb/NNNNNN.jpg tx ty tz qx qy qz qw") and scene.txt; InputError names file and line.
