@@ -14,6 +14,7 @@
 #include "stillpoint/io/camera_config.hpp"
 #include "stillpoint/io/openni2_source.hpp"
 #include "stillpoint/io/tum_sequence.hpp"
+#include "stillpoint/loop/loop_detector.hpp"
 #include "stillpoint/pipeline/slam_system.hpp"
 #include "stillpoint/stillpoint.hpp"
 #ifdef SP_HAVE_LIVE_VIEW
@@ -196,7 +197,7 @@ int run(const RunArgs& args) {
     config.dynamic.model = std::filesystem::absolute(args.detector_model).lexically_normal().string();
   if (!args.keyframe_policy.empty()) config.tracker.keyframes.policy = args.keyframe_policy;
   if (!args.loop_detector.empty()) config.loop.detector = args.loop_detector;
-  if ((config.loop.detector == "netvlad" || config.loop.detector == "hybrid") && !stillpoint::has_netvlad())
+  if (loop::needs_place_model(config.loop.detector) && !stillpoint::has_netvlad())
     throw Error(pipeline::netvlad_unavailable_message(config.loop.detector));
   InterruptWatcher interrupt;  // before any thread starts, so all threads inherit the blocked mask
   std::unique_ptr<io::FrameSource> source;

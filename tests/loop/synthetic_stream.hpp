@@ -54,6 +54,15 @@ inline Stream make_stream(const std::vector<int>& places, int per_place, std::ui
   return s;
 }
 
+// Places 0-9, then back over 2-5 (a revisit after the path has moved on), then 6.
+inline std::vector<int> revisit_path() {
+  std::vector<int> places;
+  for (int p = 0; p < 10; ++p) places.push_back(p);
+  for (int p : {2, 3, 4, 5}) places.push_back(p);
+  places.push_back(6);
+  return places;
+}
+
 // Covisibility of a growing map before any loop is closed: existing keyframes of the same or an
 // adjacent visit (adjacent places share half their words, so their keyframes share map points) and
 // those at most `radius` apart in time (nearest first).

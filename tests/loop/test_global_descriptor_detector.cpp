@@ -10,6 +10,7 @@ namespace sp::loop {
 namespace {
 
 using testing::make_stream;
+using testing::revisit_path;
 
 // Each place gets a random unit "appearance"; adjacent places blend half of their neighbour's (a
 // continuous path), and every keyframe adds noise, so neighbours are closer than unrelated places.
@@ -34,14 +35,6 @@ testing::RunResult run_global(const testing::Stream& stream, LoopDetectorParams 
   auto det = make_loop_detector("netvlad", params);
   EXPECT_EQ(det->name(), "netvlad");
   return testing::run(*det, stream);
-}
-
-std::vector<int> revisit_path() {
-  std::vector<int> places;
-  for (int p = 0; p < 10; ++p) places.push_back(p);
-  for (int p : {2, 3, 4, 5}) places.push_back(p);
-  places.push_back(6);
-  return places;
 }
 
 TEST(GlobalDescriptorLoopDetector, FindsPlantedRevisit) {

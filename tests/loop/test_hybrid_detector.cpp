@@ -13,6 +13,7 @@ namespace sp::loop {
 namespace {
 
 using testing::make_stream;
+using testing::revisit_path;
 
 Eigen::VectorXf random_unit(std::mt19937& rng) {
   std::normal_distribution<float> n(0.f, 1.f);
@@ -29,14 +30,6 @@ void describe_by_place(testing::Stream& s, std::uint32_t seed, float noise) {
   for (std::size_t k = 0; k < s.keyframes.size(); ++k)
     s.keyframes[k].global =
         (place[static_cast<std::size_t>(s.place[k])] + noise * random_unit(rng)).normalized();
-}
-
-std::vector<int> revisit_path() {
-  std::vector<int> places;
-  for (int p = 0; p < 10; ++p) places.push_back(p);
-  for (int p : {2, 3, 4, 5}) places.push_back(p);
-  places.push_back(6);
-  return places;
 }
 
 using Pair = std::pair<std::uint64_t, std::uint64_t>;

@@ -6,6 +6,7 @@
 #include <fstream>
 
 #include "stillpoint/api/system_access.hpp"
+#include "stillpoint/common/atomic_file.hpp"
 #include "stillpoint/common/error.hpp"
 #include "stillpoint/common/progress_bar.hpp"
 #include "stillpoint/common/timing.hpp"
@@ -20,13 +21,7 @@ using stillpoint::internal::SystemAccess;
 namespace {
 
 void write_json(const std::filesystem::path& file, const nlohmann::json& j) {
-  const auto tmp = file.string() + ".tmp";
-  {
-    std::ofstream out(tmp);
-    if (!out) throw Error("cannot write " + file.string());
-    out << j.dump(2) << "\n";
-  }
-  std::filesystem::rename(tmp, file);
+  write_file_atomically(file, j.dump(2) + "\n");
 }
 
 // Every closed loop judged by ground truth (loops_true / loops_false and one record per loop).

@@ -14,6 +14,7 @@
 #include "stillpoint/common/logging.hpp"
 #include "stillpoint/io/camera_config.hpp"
 #include "stillpoint/io/trajectory_io.hpp"
+#include "stillpoint/loop/loop_detector.hpp"
 #include "stillpoint/pipeline/slam_system.hpp"
 #include "stillpoint/pipeline/system_config.hpp"
 #include "stillpoint/version.hpp"
@@ -176,8 +177,7 @@ System::System(const Config& config) : impl_(std::make_unique<Impl>()) {
     if (!config.keyframe_policy.empty()) system_config.tracker.keyframes.policy = config.keyframe_policy;
     if (system_config.dynamic.mode == "oracle")
       throw Error("dynamic mode 'oracle' needs a sequence's boxes.txt: it is for the CLI's run only");
-    if ((system_config.loop.detector == "netvlad" || system_config.loop.detector == "hybrid") &&
-        !sp::pipeline::has_place_recognition())
+    if (sp::loop::needs_place_model(system_config.loop.detector) && !sp::pipeline::has_place_recognition())
       throw Error(sp::pipeline::netvlad_unavailable_message(system_config.loop.detector));
     impl_->camera = config.camera_file.empty() ? to_internal(config.camera)
                                                : sp::io::load_camera_config(config.camera_file);

@@ -46,9 +46,9 @@ struct DetectorConfig {
   // difference). People cut by the image edge score lower than people in full view, so a low
   // conf_threshold with a higher interior one keeps the cut ones without more false boxes inside.
   float interior_conf_threshold = 0.f;  // [0, 1]
-  float border_margin_px =
-      4.f;                      // a box within this many pixels of an image edge reaches the border [0, 1000]
-  float nms_threshold = 0.45f;  // class-aware NMS IoU threshold [0, 1]
+  // A box within this many pixels of an image edge reaches the border [0, 1000].
+  float border_margin_px = 4.f;
+  float nms_threshold = 0.45f;                            // class-aware NMS IoU threshold [0, 1]
   std::vector<std::string> class_names;                   // empty = COCO 80 built in
   std::vector<std::string> dynamic_classes = {"person"};  // only these are reported; empty = all classes
   // OpenCV worker threads for the forward pass. cv::setNumThreads is process-wide, so the default 0

@@ -80,9 +80,9 @@ Detections YoloDetector::detect(const cv::Mat& bgr) {
     return d.class_id < 0 || static_cast<std::size_t>(d.class_id) >= keep_class_.size() ||
            !keep_class_[static_cast<std::size_t>(d.class_id)];
   });
+  // Every box already scores >= conf_threshold, so an interior threshold at or below it drops nothing.
   std::vector<Detection> boxes = map_to_image(raw, tf);
-  if (cfg_.interior_conf_threshold > cfg_.conf_threshold)
-    drop_weak_interior(boxes, bgr.size(), cfg_.interior_conf_threshold, cfg_.border_margin_px);
+  drop_weak_interior(boxes, bgr.size(), cfg_.interior_conf_threshold, cfg_.border_margin_px);
   Detections result;
   result.items = nms_per_class(boxes, cfg_.nms_threshold);
   result.inference_ms = sw.elapsed_ms();

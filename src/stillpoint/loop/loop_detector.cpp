@@ -60,6 +60,8 @@ void LoopDetectorParams::validate() const {
   sequence.validate();
 }
 
+bool needs_place_model(const std::string& method) { return method == "netvlad" || method == "hybrid"; }
+
 std::unique_ptr<LoopDetector> make_loop_detector(const std::string& method,
                                                  const LoopDetectorParams& params) {
   LoopDetectorParams p = params;

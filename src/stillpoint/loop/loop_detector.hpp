@@ -52,8 +52,8 @@ struct DetectorStats {
   std::size_t candidates = 0;            // loop candidates returned
   std::size_t descriptor_pairs = 0;      // hybrid: candidates scored by global-descriptor distance
   std::size_t vetoed_by_descriptor = 0;  // hybrid: BoW candidates dropped as too far in descriptor space
-  std::size_t undescribed_candidates =
-      0;  // hybrid: candidates passed on unranked (a keyframe without descriptor)
+  // hybrid: candidates passed on unranked (a keyframe without descriptor)
+  std::size_t undescribed_candidates = 0;
 };
 
 class LoopDetector {
@@ -82,8 +82,8 @@ struct GlobalDescriptorParams {
 
 // BoW candidates re-ranked by the global descriptor (method "hybrid").
 struct HybridParams {
-  std::string bow =
-      "bow-sequence";            // the detector whose candidates are re-ranked: bow-keyframe | bow-sequence
+  // The detector whose candidates are re-ranked: bow-keyframe | bow-sequence.
+  std::string bow = "bow-sequence";
   double max_distance_sq = 1.2;  // candidates whose descriptors are farther apart are dropped [d²], (0, 4]
   static HybridParams from_yaml(const sp::ConfigReader& r);
 };
@@ -101,6 +101,11 @@ struct LoopDetectorParams {
   static LoopDetectorParams from_yaml(const sp::ConfigReader& r);
   void validate() const;  // throws sp::Error
 };
+
+// Whether a detector method needs a place model (ParC_NetVLAD descriptors): "netvlad" and "hybrid".
+// The configuration-level twin of LoopDetector::uses_global_descriptors(), for checks made before any
+// detector exists (a build without libtorch refuses these methods up front).
+[[nodiscard]] bool needs_place_model(const std::string& method);
 
 // method: "bow-keyframe", "bow-sequence", "netvlad" or "hybrid" (overrides params.method); anything
 // else is an sp::Error.

@@ -13,6 +13,7 @@
 #include <opencv2/imgproc.hpp>
 #include <unordered_set>
 
+#include "stillpoint/common/atomic_file.hpp"
 #include "stillpoint/common/error.hpp"
 #include "stillpoint/common/timing.hpp"
 
@@ -46,14 +47,7 @@ PlyPoint make_point(const Eigen::Vector3d& p, const cv::Vec3b& bgr) {
 }
 
 void write_text(const std::filesystem::path& file, const std::string& text) {
-  const auto tmp = file.string() + ".tmp";
-  {
-    std::ofstream out(tmp, std::ios::binary);
-    if (!out) throw Error("cannot write " + file.string());
-    out << text;
-    if (!out) throw Error("cannot write " + file.string());
-  }
-  std::filesystem::rename(tmp, file);
+  write_file_atomically(file, text);
 }
 
 }  // namespace

@@ -10,6 +10,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "stillpoint/common/atomic_file.hpp"
 #include "stillpoint/common/error.hpp"
 
 namespace sp::place {
@@ -58,15 +59,8 @@ void write_training_log(const fs::path& out, const std::vector<EpochStats>& rows
     }
     j.push_back(std::move(row));
   }
-  // Via a .tmp file: a resumed run reads this one back, and a kill mid-write must not truncate it.
-  const fs::path json = with_suffix(out, ".log.json"), json_tmp = with_suffix(out, ".log.json.tmp");
-  {
-    std::ofstream f(json_tmp);
-    f << j.dump(2) << "\n";
-    f.close();
-    if (!f) throw sp::Error("cannot write the training log " + json_tmp.string());
-  }
-  fs::rename(json_tmp, json);
+  // Atomically: a resumed run reads this one back, and a kill mid-write must not truncate it.
+  write_file_atomically(with_suffix(out, ".log.json"), j.dump(2) + "\n");
   const fs::path png = with_suffix(out, ".curve.png");
   if (!cv::imwrite(png.string(), draw_training_curve(rows)))
     throw sp::Error("cannot write the training curve " + png.string());
