@@ -13,6 +13,7 @@
 #include "stillpoint/common/timing.hpp"
 #include "stillpoint/place/bow.hpp"
 #include "stillpoint/place/descriptor.hpp"
+#include "stillpoint/place/distill.hpp"
 #include "stillpoint/place/retrieval.hpp"
 #include "stillpoint/place/trainer.hpp"
 
@@ -23,14 +24,25 @@ namespace {
 namespace fs = std::filesystem;
 using sp::place::RetrievalSet;
 
-struct TrainArgs {
-  sp::place::TrainOptions o;
+// The architecture options shared by `vpr train` and `vpr distill`.
+struct ModelArgs {
   std::string variant = "small", parc = "on", cbam = "on", config;
   double width_mult = 0, depth_mult = 0;
   int input_h = 0, input_w = 0, clusters = 0;
+};
+
+struct TrainArgs {
+  sp::place::TrainOptions o;
+  ModelArgs m;
   int world_size = 0, rank = -1;  // unset (0, -1): torchrun's WORLD_SIZE / RANK, else one process
   std::string master;             // HOST:PORT; empty: MASTER_ADDR / MASTER_PORT
   std::string augment = "on", lr_schedule = "cosine";
+};
+
+struct DistillArgs {
+  sp::place::DistillOptions o;
+  ModelArgs m;
+  std::string augment = "on", center = "on";
 };
 
 struct EvalArgs {
@@ -97,24 +109,48 @@ void resolve_distributed(TrainArgs& a) {
     spdlog::info("resuming on every rank: each needs {} and its .epoch/.optim files", a.o.resume.string());
 }
 
-void run_train(TrainArgs& a) {
-  auto& o = a.o;
-  resolve_distributed(a);
-  o.model = a.variant == "tiny" ? sp::place::ModelConfig::tiny() : sp::place::ModelConfig::small();
+sp::place::ModelConfig build_model(const ModelArgs& a) {
+  auto m = a.variant == "tiny" ? sp::place::ModelConfig::tiny() : sp::place::ModelConfig::small();
   if (!a.config.empty()) {
     const auto r = sp::ConfigReader::from_file(a.config);
-    o.model = sp::place::ModelConfig::from_yaml(r);
+    m = sp::place::ModelConfig::from_yaml(r);
     r.finish();
   }
   if (a.width_mult > 0 || a.depth_mult > 0) {
-    o.model = sp::place::ModelConfig::scaled(o.model, a.width_mult > 0 ? a.width_mult : 1.0,
-                                             a.depth_mult > 0 ? a.depth_mult : 1.0);
+    m = sp::place::ModelConfig::scaled(m, a.width_mult > 0 ? a.width_mult : 1.0,
+                                       a.depth_mult > 0 ? a.depth_mult : 1.0);
   }
-  if (a.input_h > 0) o.model.input_height = a.input_h;
-  if (a.input_w > 0) o.model.input_width = a.input_w;
-  if (a.clusters > 0) o.model.clusters = a.clusters;
-  o.model.parc = a.parc == "on";
-  o.model.cbam = a.cbam == "on";
+  if (a.input_h > 0) m.input_height = a.input_h;
+  if (a.input_w > 0) m.input_width = a.input_w;
+  if (a.clusters > 0) m.clusters = a.clusters;
+  m.parc = a.parc == "on";
+  m.cbam = a.cbam == "on";
+  return m;
+}
+
+void add_model_options(CLI::App* cmd, ModelArgs& m) {
+  cmd->add_option("--variant", m.variant)->check(CLI::IsMember({"small", "tiny"}))->capture_default_str();
+  cmd->add_option("--config", m.config, "YAML model config (ModelConfig::from_yaml keys)");
+  cmd->add_option("--parc", m.parc)->check(CLI::IsMember({"on", "off"}))->capture_default_str();
+  cmd->add_option("--cbam", m.cbam)->check(CLI::IsMember({"on", "off"}))->capture_default_str();
+  cmd->add_option("--width-mult", m.width_mult, "scale the variant's widths")->check(CLI::Range(0.05, 2.0));
+  cmd->add_option("--depth-mult", m.depth_mult, "scale the variant's depths")->check(CLI::Range(0.1, 2.0));
+  cmd->add_option("--input-height", m.input_h)->check(CLI::Range(32, 2048));
+  cmd->add_option("--input-width", m.input_w)->check(CLI::Range(32, 2048));
+  cmd->add_option("--clusters", m.clusters)->check(CLI::Range(2, 512));
+}
+
+void run_distill(DistillArgs& a) {
+  a.o.model = build_model(a.m);
+  a.o.augment.enabled = a.augment == "on";
+  a.o.center_targets = a.center == "on";
+  sp::place::distill_model(a.o);
+}
+
+void run_train(TrainArgs& a) {
+  auto& o = a.o;
+  resolve_distributed(a);
+  o.model = build_model(a.m);
   o.augment.enabled = a.augment == "on";
   o.lr_schedule.kind = sp::place::parse_lr_schedule(a.lr_schedule);
   // train_model refuses a --val room that is also trained on and writes the log files (rank 0).
@@ -218,17 +254,7 @@ void add_vpr_command(CLI::App& app) {
   auto* train = vpr->add_subcommand("train", "train on dynsynth places folders");
   train->add_option("--data", ta->o.data, "places folders (or folders of them)")->required()->expected(1, -1);
   train->add_option("--out", ta->o.out, "model file to write")->required();
-  train->add_option("--variant", ta->variant)->check(CLI::IsMember({"small", "tiny"}))->capture_default_str();
-  train->add_option("--config", ta->config, "YAML model config (ModelConfig::from_yaml keys)");
-  train->add_option("--parc", ta->parc)->check(CLI::IsMember({"on", "off"}))->capture_default_str();
-  train->add_option("--cbam", ta->cbam)->check(CLI::IsMember({"on", "off"}))->capture_default_str();
-  train->add_option("--width-mult", ta->width_mult, "scale the variant's widths")
-      ->check(CLI::Range(0.05, 2.0));
-  train->add_option("--depth-mult", ta->depth_mult, "scale the variant's depths")
-      ->check(CLI::Range(0.1, 2.0));
-  train->add_option("--input-height", ta->input_h)->check(CLI::Range(32, 2048));
-  train->add_option("--input-width", ta->input_w)->check(CLI::Range(32, 2048));
-  train->add_option("--clusters", ta->clusters)->check(CLI::Range(2, 512));
+  add_model_options(train, ta->m);
   train->add_option("--epochs", ta->o.epochs)->check(CLI::Range(1, 1000))->capture_default_str();
   train->add_option("--lr", ta->o.lr)->check(CLI::Range(1e-7, 1.0))->capture_default_str();
   train->add_option("--lr-schedule", ta->lr_schedule, "per-step learning-rate schedule after the warm-up")
@@ -283,6 +309,8 @@ void add_vpr_command(CLI::App& app) {
       ->capture_default_str();
   train->add_option("--seed", ta->o.seed)->capture_default_str();
   train->add_option("--resume", ta->o.resume, "checkpoint (<out>.ckpt) to continue from");
+  train->add_option("--init", ta->o.init,
+                    "model to start from, e.g. from vpr distill (architecture and NetVLAD from the file)");
   train->add_option("--threads", ta->o.threads)->check(CLI::Range(1, 2))->capture_default_str();
   train->add_flag("!--no-progress", ta->o.progress, "no progress bar");
   train
@@ -299,6 +327,58 @@ void add_vpr_command(CLI::App& app) {
       ->check(CLI::Range(1.0, 86400.0))
       ->capture_default_str();
   train->callback([ta] { run_train(*ta); });
+
+  auto da = std::make_shared<DistillArgs>();
+  auto* distill = vpr->add_subcommand(
+      "distill",
+      "initialise the backbone by distilling a pretrained teacher's features, then NetVLAD by k-means");
+  distill->add_option("--data", da->o.data, "places folders (or folders of them)")
+      ->required()
+      ->expected(1, -1);
+  distill->add_option("--out", da->o.out, "model file to write")->required();
+  distill
+      ->add_option("--teacher", da->o.teacher,
+                   "teacher network (ONNX), e.g. models/yolox_nano/yolox_nano.onnx")
+      ->required();
+  distill
+      ->add_option("--teacher-mid", da->o.teacher_mid, "teacher layer for the student's stage 3 (\"\": none)")
+      ->capture_default_str();
+  distill->add_option("--teacher-top", da->o.teacher_top, "teacher layer for the NetVLAD input (\"\": none)")
+      ->capture_default_str();
+  distill->add_option("--teacher-size", da->o.teacher_size, "square teacher input, px")
+      ->check(CLI::Range(32, 4096))
+      ->capture_default_str();
+  distill->add_option("--top-weight", da->o.top_weight, "weight of the NetVLAD-input level")
+      ->check(CLI::Range(0.0, 100.0))
+      ->capture_default_str();
+  distill
+      ->add_option("--center-targets", da->center,
+                   "subtract the teacher's per-channel mean before the cosine")
+      ->check(CLI::IsMember({"on", "off"}))
+      ->capture_default_str();
+  add_model_options(distill, da->m);
+  distill->add_option("--steps", da->o.steps)->check(CLI::Range(1, 10000000))->capture_default_str();
+  distill->add_option("--batch", da->o.batch)->check(CLI::Range(1, 1024))->capture_default_str();
+  distill->add_option("--lr", da->o.lr, "Adam; 5 % warm-up, then cosine to 1 %")
+      ->check(CLI::Range(0.0, 1.0))
+      ->capture_default_str();
+  distill->add_option("--max-images", da->o.max_images, "images with cached teacher features (0: all)")
+      ->check(CLI::Range(0, 10000000))
+      ->capture_default_str();
+  distill->add_option("--kmeans-images", da->o.kmeans_images)
+      ->check(CLI::Range(1, 100000))
+      ->capture_default_str();
+  distill->add_option("--augment", da->augment, "colour, exposure, blur and noise on the student's input")
+      ->check(CLI::IsMember({"on", "off"}))
+      ->capture_default_str();
+  distill->add_option("--val", da->o.val, "held-back places folders: recall of the result")->expected(1, -1);
+  distill->add_option("--eval-every", da->o.eval_every, "steps between val evaluations (0: at the end only)")
+      ->check(CLI::Range(0, 10000000))
+      ->capture_default_str();
+  distill->add_option("--seed", da->o.seed)->capture_default_str();
+  distill->add_option("--threads", da->o.threads)->check(CLI::Range(1, 2))->capture_default_str();
+  distill->add_flag("!--no-progress", da->o.progress, "no progress bar");
+  distill->callback([da] { run_distill(*da); });
 
   auto ea = std::make_shared<EvalArgs>();
   auto* eval = vpr->add_subcommand("eval", "Recall@1/5/10/20 on a place-recognition set");

@@ -35,6 +35,9 @@ struct TrainOptions {
   int kmeans_images = 200;         // images whose features initialise the NetVLAD centroids
   std::uint64_t seed = 1;          // torch::manual_seed and the mining RNG
   std::filesystem::path resume;    // checkpoint to continue from (empty = start fresh)
+  // Model file to start from (e.g. `vpr distill`'s output): its architecture, weights and NetVLAD
+  // centroids replace `model` and the k-means initialisation. Not with `resume`.
+  std::filesystem::path init;
   // Applied to the images of each training batch (not to the mining cache nor to validation).
   AugmentOptions augment;
   // Places folders (or any `vpr eval` set) never trained on: Recall@1/5/10 after every epoch. With
