@@ -6,7 +6,7 @@
 # rooms. Prints the table (mean ± std over the seeds) and writes WORK/results/summary.json.
 # Run from the repository root after building `stillpoint`:
 #   scripts/distill_vpr.sh [BUILD_DIR] [WORK_DIR]
-# Environment: SEEDS ("1 2 3"), STEPS (600), LR (3e-3), WIDTH (1: the small variant's widths),
+# Environment: SEEDS ("1 2 3"), STEPS (1200), LR (3e-3), WIDTH (1: the small variant's widths),
 # JOBS (runs at once, 2), ROOMS (40), TOP (teacher layer for the NetVLAD input, dark4), VARIANTS.
 set -euo pipefail
 BUILD=${1:-build}
@@ -18,7 +18,7 @@ CORRIDOR=$ROOT/../shared/data/vpr/corridor
 TEACHER=$ROOT/models/yolox_nano/yolox_nano.onnx
 PY=/usr/bin/python3
 SEEDS=${SEEDS:-1 2 3}
-STEPS=${STEPS:-600}
+STEPS=${STEPS:-1200}
 LR=${LR:-3e-3}
 WIDTH=${WIDTH:-1}
 JOBS=${JOBS:-2}
