@@ -91,12 +91,27 @@ torch::Tensor cosine_loss(const torch::Tensor& student, const torch::Tensor& tea
   return (1 - (s * teacher_unit).sum(1)).mean();
 }
 
+// One matched pair: a student map (backbone stage 3, or stage 4 after CBAM: the NetVLAD input) and
+// the teacher layer pooled onto its grid.
 struct Level {
-  bool used = false;
+  int stage = 3;
   int teacher_slot = 0;
+  double weight = 1;
   torch::Tensor targets;  // (N, Ct, h, w) unit vectors, half precision
   torch::nn::Conv2d proj{nullptr};
 };
+
+// The student's map for a level from the backbone's stage outputs.
+torch::Tensor student_map(ParCNetVLAD& model, const std::vector<torch::Tensor>& stages, int stage) {
+  if (stage == 4 && model->cfg.cbam) return model->cbam(stages[4]);
+  return stages[static_cast<size_t>(stage)];
+}
+
+double mean(const std::vector<double>& v, size_t first, size_t count) {
+  double m = 0;
+  for (size_t k = first; k < first + count; ++k) m += v[k];
+  return m / static_cast<double>(count);
+}
 
 }  // namespace
 
@@ -109,38 +124,31 @@ DistillStats distill_model(const DistillOptions& o) {
   std::mt19937_64 rng(o.seed);
 
   std::vector<std::string> layers;
-  Level mid, top;
+  std::vector<Level> levels;
   if (!o.teacher_mid.empty()) {
-    mid.used = true;
-    mid.teacher_slot = static_cast<int>(layers.size());
+    levels.push_back({3, 0, 1.0, {}, nullptr});
     layers.push_back(o.teacher_mid);
   }
   if (!o.teacher_top.empty() && o.top_weight > 0) {
-    top.used = true;
     // Both levels may read the same teacher layer (pooled to two grids): forward it once.
-    if (mid.used && o.teacher_top == o.teacher_mid) {
-      top.teacher_slot = mid.teacher_slot;
-    } else {
-      top.teacher_slot = static_cast<int>(layers.size());
-      layers.push_back(o.teacher_top);
-    }
+    const bool shared = !layers.empty() && o.teacher_top == o.teacher_mid;
+    if (!shared) layers.push_back(o.teacher_top);
+    levels.push_back({4, static_cast<int>(layers.size()) - 1, o.top_weight, {}, nullptr});
   }
   Teacher teacher(o.teacher, layers, o.teacher_size);
 
-  auto all = collect_places(o.data);
-  std::vector<PlaceImage> imgs;
+  const auto all = collect_places(o.data);
+  std::vector<fs::path> files;
   const size_t step =
       o.max_images > 0 ? std::max<size_t>(1, all.size() / static_cast<size_t>(o.max_images)) : 1;
-  for (size_t i = 0; i < all.size() && (o.max_images == 0 || imgs.size() < static_cast<size_t>(o.max_images));
-       i += step)
-    imgs.push_back(all[i]);
-  if (imgs.empty()) throw sp::Error("vpr distill: no training image");
+  for (size_t i = 0;
+       i < all.size() && (o.max_images == 0 || files.size() < static_cast<size_t>(o.max_images)); i += step)
+    files.push_back(all[i].file);
+  if (files.empty()) throw sp::Error("vpr distill: no training image");
 
   ParCNetVLAD model(o.model);
   const int h = model->cfg.input_height, w = model->cfg.input_width;
-  spdlog::info("distil: {} images, model {}", imgs.size(), model->cfg.summary());
-  std::vector<fs::path> files;
-  for (const auto& im : imgs) files.push_back(im.file);
+  spdlog::info("distil: {} images, model {}", files.size(), model->cfg.summary());
   const auto store = load_images(files, h, w, o.progress, "loading images");
 
   // The student's map sizes at its input size fix the grid each teacher map is pooled to.
@@ -150,46 +158,39 @@ DistillStats distill_model(const DistillOptions& o) {
     model->eval();
     shapes = model->backbone->stage_outputs(torch::zeros({1, 3, h, w}));
   }
-  const auto n = static_cast<int64_t>(imgs.size());
+  const auto n = static_cast<int64_t>(files.size());
   {
-    sp::ProgressBar bar("teacher features", imgs.size(), o.progress);
+    sp::ProgressBar bar("teacher features", files.size(), o.progress);
     for (int64_t i = 0; i < n; ++i) {
       const cv::Mat bgr = cv::imread(files[static_cast<size_t>(i)].string(), cv::IMREAD_COLOR);
       if (bgr.empty()) throw sp::InputError(files[static_cast<size_t>(i)].string(), 0, "cannot read image");
       const auto t = teacher.features(bgr);
-      for (auto* level : {&mid, &top}) {
-        if (!level->used) continue;
-        const auto& s = shapes[level == &mid ? 3 : 4];
+      for (auto& level : levels) {
+        const auto& s = shapes[static_cast<size_t>(level.stage)];
         // Area pooling onto the student's grid; normalised below, once every image is in.
-        const auto pooled = F::adaptive_avg_pool2d(t[static_cast<size_t>(level->teacher_slot)],
+        const auto pooled = F::adaptive_avg_pool2d(t[static_cast<size_t>(level.teacher_slot)],
                                                    F::AdaptiveAvgPool2dFuncOptions({s.size(2), s.size(3)}));
-        if (!level->targets.defined())
-          level->targets = torch::empty({n, pooled.size(1), s.size(2), s.size(3)}, torch::kFloat32);
-        level->targets[i].copy_(pooled[0]);
+        if (!level.targets.defined())
+          level.targets = torch::empty({n, pooled.size(1), s.size(2), s.size(3)}, torch::kFloat32);
+        level.targets[i].copy_(pooled[0]);
       }
       if (i % 32 == 0) bar.update(static_cast<size_t>(i + 1));
     }
     bar.finish();
   }
-  for (auto* level : {&mid, &top}) {
-    if (!level->used) continue;
-    auto& t = level->targets;
+  std::vector<torch::Tensor> params = model->parameters();
+  for (auto& level : levels) {
+    auto& t = level.targets;
     // The teacher's activations (SiLU) are nearly all positive, so any two of its feature vectors
     // are close in angle and matching their mean direction alone already gives a small loss.
     // Subtracting the per-channel mean over the training set makes the cosine measure what differs
     // between places.
     if (o.center_targets) t -= t.mean({0, 2, 3}, /*keepdim=*/true);
     t = F::normalize(t, F::NormalizeFuncOptions().dim(1)).to(torch::kHalf);
+    level.proj = torch::nn::Conv2d(
+        torch::nn::Conv2dOptions(shapes[static_cast<size_t>(level.stage)].size(1), t.size(1), 1));
+    for (const auto& p : level.proj->parameters()) params.push_back(p);
   }
-  if (mid.used)
-    mid.proj = torch::nn::Conv2d(torch::nn::Conv2dOptions(shapes[3].size(1), mid.targets.size(1), 1));
-  if (top.used)
-    top.proj = torch::nn::Conv2d(torch::nn::Conv2dOptions(shapes[4].size(1), top.targets.size(1), 1));
-
-  std::vector<torch::Tensor> params = model->parameters();
-  for (auto* level : {&mid, &top})
-    if (level->used)
-      for (const auto& p : level->proj->parameters()) params.push_back(p);
   torch::optim::Adam opt(params, torch::optim::AdamOptions(o.lr));
   LrSchedule sched;
   sched.kind = LrScheduleKind::Cosine;
@@ -205,7 +206,7 @@ DistillStats distill_model(const DistillOptions& o) {
   sp::ProgressBar bar("distilling", static_cast<size_t>(o.steps), o.progress);
   for (int s = 0; s < o.steps; ++s) {
     const double lr = learning_rate(sched, o.lr, s, o.steps, 1);
-    for (auto& g : opt.param_groups()) g.options().set_lr(lr);
+    set_lr(opt, lr);
     std::vector<int64_t> idx(static_cast<size_t>(o.batch));
     for (auto& i : idx) i = pick(rng);
     const auto sel = torch::tensor(idx);
@@ -216,13 +217,9 @@ DistillStats distill_model(const DistillOptions& o) {
     model->train();
     const auto outs = model->backbone->stage_outputs(normalise(images));
     auto loss = torch::zeros({});
-    if (mid.used)
-      loss = loss + cosine_loss(mid.proj(outs[3]), mid.targets.index_select(0, sel).to(torch::kFloat32));
-    if (top.used) {
-      const auto f = model->cfg.cbam ? model->cbam(outs[4]) : outs[4];
-      loss = loss +
-             o.top_weight * cosine_loss(top.proj(f), top.targets.index_select(0, sel).to(torch::kFloat32));
-    }
+    for (auto& level : levels)
+      loss = loss + level.weight * cosine_loss(level.proj(student_map(model, outs, level.stage)),
+                                               level.targets.index_select(0, sel).to(torch::kFloat32));
     opt.zero_grad();
     loss.backward();
     opt.step();
@@ -232,9 +229,8 @@ DistillStats distill_model(const DistillOptions& o) {
     losses.push_back(l);
     bar.update(static_cast<size_t>(s + 1), fmt::format("loss {:.4f}", l));
     if ((s + 1) % 100 == 0) {
-      double m = 0;
-      for (size_t k = losses.size() - 100; k < losses.size(); ++k) m += losses[k];
-      spdlog::info("step {}: loss {:.4f} (mean of the last 100), lr {:.3g}", s + 1, m / 100, lr);
+      spdlog::info("step {}: loss {:.4f} (mean of the last 100), lr {:.3g}", s + 1,
+                   mean(losses, losses.size() - 100, 100), lr);
     }
     if (o.eval_every > 0 && (s + 1) % o.eval_every == 0 && (s + 1) < o.steps && !val.sets.empty()) {
       init_centroids(model, store, o.kmeans_images, rng);
@@ -250,15 +246,10 @@ DistillStats distill_model(const DistillOptions& o) {
   const fs::path tmp = o.out.string() + ".tmp";
   save_model(model, tmp);
   fs::rename(tmp, o.out);
-  const auto mean_of = [&](size_t first, size_t count) {
-    double m = 0;
-    for (size_t k = first; k < first + count; ++k) m += losses[k];
-    return m / static_cast<double>(count);
-  };
   const size_t window = std::max<size_t>(1, std::min<size_t>(50, losses.size() / 5));
   stats.steps = o.steps;
-  stats.first_loss = mean_of(0, window);
-  stats.last_loss = mean_of(losses.size() - window, window);
+  stats.first_loss = mean(losses, 0, window);
+  stats.last_loss = mean(losses, losses.size() - window, window);
   if (!val.sets.empty()) {
     stats.val = evaluate_val(model, val, single);
     spdlog::info("val R@1 {:.3f} R@5 {:.3f} R@10 {:.3f} ({} queries)", stats.val->recall[0],

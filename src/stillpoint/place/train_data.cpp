@@ -160,4 +160,8 @@ void augment_batch(torch::Tensor& batch, const AugmentOptions& o, const std::vec
   }
 }
 
+void set_lr(torch::optim::Optimizer& opt, double lr) {
+  for (auto& g : opt.param_groups()) g.options().set_lr(lr);
+}
+
 }  // namespace sp::place::detail

@@ -51,4 +51,7 @@ RecallResult evaluate_val(ParCNetVLAD& model, const ValData& v, ProcessGroup& pg
 // Augments a batch in place: row r of `batch` (uint8 N,3,H,W) with keys[r].
 void augment_batch(torch::Tensor& batch, const AugmentOptions& o, const std::vector<AugmentKey>& keys);
 
+// Sets the learning rate of every parameter group.
+void set_lr(torch::optim::Optimizer& opt, double lr);
+
 }  // namespace sp::place::detail

@@ -152,10 +152,6 @@ void check_val_disjoint(const TrainOptions& o, const std::vector<PlaceImage>& tr
   }
 }
 
-void set_lr(torch::optim::Optimizer& opt, double lr) {
-  for (auto& g : opt.param_groups()) g.options().set_lr(lr);
-}
-
 // <ckpt>.epoch: the last finished epoch, then (with --val) "best_epoch best_R@1" so that a resumed run
 // keeps comparing against the best so far and still writes that epoch's weights (<ckpt>.best).
 struct CheckpointState {
