@@ -187,6 +187,28 @@ TEST(Evaluate, NoOverlapThrows) {
   EXPECT_EQ(evaluate(gt, est, o).pairs, 30u);
 }
 
+TEST(Evaluate, AteSplitIntoTheGroundTruthCamerasAxes) {
+  // The estimate is off by d along each ground-truth camera's own optical axis (alternating sign) and by
+  // e along its x axis; the cameras turn, so in the world frame the errors point everywhere.
+  const double d = 0.02, e = 0.005;
+  const auto gt = wavy(60);
+  std::vector<StampedPose> est;
+  for (std::size_t k = 0; k < gt.size(); ++k) {
+    const double s = k % 2 ? -1.0 : 1.0;
+    est.push_back(pose(gt[k].stamp, gt[k].t + gt[k].q * Eigen::Vector3d(e, 0, s * d), gt[k].q));
+  }
+  EvalOptions none;
+  none.align = Alignment::None;
+  const auto r = evaluate(gt, est, none);
+  EXPECT_NEAR(r.ate_camera_axes_rmse.x(), e, 1e-12);
+  EXPECT_NEAR(r.ate_camera_axes_rmse.y(), 0.0, 1e-12);
+  EXPECT_NEAR(r.ate_camera_axes_rmse.z(), d, 1e-12);
+  // With an alignment the split still adds up to the ATE.
+  const auto aligned = evaluate(gt, est, {});
+  EXPECT_NEAR(aligned.ate_camera_axes_rmse.squaredNorm(), aligned.ate.rmse * aligned.ate.rmse, 1e-12);
+  EXPECT_GT(aligned.ate_camera_axes_rmse.z(), 2 * aligned.ate_camera_axes_rmse.y());
+}
+
 TEST(Evaluate, JsonAndTableCarryTheFigures) {
   const auto r = evaluate(wavy(90), wavy(90), {});
   const auto j = to_json(r);
@@ -199,6 +221,9 @@ TEST(Evaluate, JsonAndTableCarryTheFigures) {
   const std::string table = format_table(r);
   EXPECT_NE(table.find("ATE"), std::string::npos);
   EXPECT_NE(table.find("RPE rot"), std::string::npos);
+  EXPECT_NE(table.find("optical axis"), std::string::npos);
+  EXPECT_DOUBLE_EQ(j.at("ate_camera_axes_rmse").at("z_optical_axis").get<double>(),
+                   r.ate_camera_axes_rmse.z());
 }
 
 }  // namespace

@@ -77,10 +77,16 @@ void evaluate_ate(const std::vector<io::StampedPose>& gt, const std::vector<io::
   if (o.align != Alignment::None) r.alignment = geo::align_umeyama(src, dst, o.align == Alignment::Sim3);
   r.pairs = matches.size();
   r.gt_positions = dst;
+  Eigen::Vector3d camera_axes_sq = Eigen::Vector3d::Zero();
   for (std::size_t k = 0; k < src.size(); ++k) {
     r.est_positions.push_back(r.alignment.apply(src[k]));
-    r.ate_errors.push_back((r.est_positions.back() - dst[k]).norm());
+    const Eigen::Vector3d error_w = r.est_positions.back() - dst[k];
+    r.ate_errors.push_back(error_w.norm());
+    // TUM poses are camera-to-world, so R_wc^T takes a world vector into the camera's frame.
+    const Eigen::Vector3d error_c = gt[matches[k].first].q.normalized().conjugate() * error_w;
+    camera_axes_sq += error_c.cwiseAbs2();
   }
+  r.ate_camera_axes_rmse = (camera_axes_sq / static_cast<double>(src.size())).cwiseSqrt();
   r.ate = compute_stats(r.ate_errors);
 }
 

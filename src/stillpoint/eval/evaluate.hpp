@@ -33,6 +33,10 @@ struct EvalResult {
   ErrorStats ate, rpe_trans, rpe_rot_deg;
   std::size_t rpe_pairs = 0;
   geo::Similarity3 alignment;  // gt ≈ alignment.apply(est)
+  // ATE RMSE of each component of the error in the ground-truth camera's frame (x right, y down, z
+  // along the optical axis): which direction the error lies in, e.g. depth-axis jitter of a still
+  // camera. The three squared add up to ate.rmse squared.
+  Eigen::Vector3d ate_camera_axes_rmse = Eigen::Vector3d::Zero();
 
   // Per associated pair, in time order (for plots).
   std::vector<double> stamps;                                // estimate stamps

@@ -26,6 +26,8 @@ nlohmann::json to_json(const EvalResult& r) {
   j["rpe_trans"] = stats_json(r.rpe_trans);
   j["rpe_rot_deg"] = stats_json(r.rpe_rot_deg);
   j["rpe_pairs"] = r.rpe_pairs;
+  const Eigen::Vector3d& axes = r.ate_camera_axes_rmse;
+  j["ate_camera_axes_rmse"] = {{"x_right", axes.x()}, {"y_down", axes.y()}, {"z_optical_axis", axes.z()}};
   const Eigen::Matrix3d& R = r.alignment.R;
   j["alignment"] = {
       {"scale", r.alignment.scale},
@@ -43,6 +45,10 @@ std::string format_table(const EvalResult& r) {
   out += fmt::format("ATE pairs {}, RPE pairs {}", r.pairs, r.rpe_pairs);
   if (r.alignment.scale != 1.0) out += fmt::format(", Sim(3) scale {:.5f}", r.alignment.scale);
   out += "\n";
+  const Eigen::Vector3d& axes = r.ate_camera_axes_rmse;
+  out += fmt::format(
+      "ATE rmse in the camera's frame (m): x right {:.5f}, y down {:.5f}, z optical axis {:.5f}\n", axes.x(),
+      axes.y(), axes.z());
   return out;
 }
 
