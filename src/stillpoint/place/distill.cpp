@@ -241,11 +241,7 @@ DistillStats distill_model(const DistillOptions& o) {
   }
   bar.finish();
   init_centroids(model, store, o.kmeans_images, rng);
-  if (o.out.has_parent_path()) fs::create_directories(o.out.parent_path());
-  // Written beside and renamed into place: a kill while writing never leaves a truncated model.
-  const fs::path tmp = o.out.string() + ".tmp";
-  save_model(model, tmp);
-  fs::rename(tmp, o.out);
+  save_model(model, o.out);
   const size_t window = std::max<size_t>(1, std::min<size_t>(50, losses.size() / 5));
   stats.steps = o.steps;
   stats.first_loss = mean(losses, 0, window);

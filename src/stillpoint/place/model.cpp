@@ -5,7 +5,9 @@
 #include <algorithm>
 #include <cmath>
 #include <opencv2/imgproc.hpp>
+#include <sstream>
 
+#include "stillpoint/common/atomic_file.hpp"
 #include "stillpoint/common/error.hpp"
 
 namespace sp::place {
@@ -240,7 +242,9 @@ void save_model(ParCNetVLAD& model, const std::filesystem::path& file) {
       c.widths[3], c.parc ? 1 : 0, c.cbam ? 1 : 0, c.clusters,  c.input_height, c.input_width};
   archive.write("sp_model_config", torch::tensor(meta, torch::kInt64));
   if (file.has_parent_path()) std::filesystem::create_directories(file.parent_path());
-  archive.save_to(file.string());
+  std::ostringstream bytes;
+  archive.save_to(bytes);
+  write_file_atomically(file, bytes.str());
 }
 
 ParCNetVLAD load_model(const std::filesystem::path& file) {

@@ -113,7 +113,8 @@ TORCH_MODULE(ParCNetVLAD);
 // BGR 8-bit image → normalised (1,3,H,W) float tensor at the model's input size (ImageNet mean/std).
 torch::Tensor image_to_tensor(const cv::Mat& bgr, int height, int width);
 
-// Model file: a torch archive with the weights plus the configuration.
+// Model file: a torch archive with the weights plus the configuration. Written whole or not at all (a
+// kill while saving leaves the previous file), its folder created if needed.
 void save_model(ParCNetVLAD& model, const std::filesystem::path& file);
 ParCNetVLAD load_model(const std::filesystem::path& file);
 
