@@ -1,10 +1,14 @@
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <chrono>
+#include <fstream>
 #include <future>
 #include <memory>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <sstream>
+#include <string>
 #include <thread>
 
 #include "../support/shared_data.hpp"
@@ -72,6 +76,42 @@ TEST(TumSequence, StartAndMaxFramesSelectAWindow) {
   std::vector<std::size_t> idx;
   while (auto f = seq.next()) idx.push_back(f->index);
   EXPECT_EQ(idx, (std::vector<std::size_t>{5, 6, 7, 8}));
+}
+
+// The niceness of each of this process's threads, from /proc/self/task/TID/stat (field 19; the
+// command name in field 2 is parenthesised and may hold spaces, so fields are counted after its ')').
+std::vector<int> thread_nice_values() {
+  std::vector<int> out;
+  for (const auto& task : fs::directory_iterator("/proc/self/task")) {
+    std::ifstream in(task.path() / "stat");
+    std::string stat((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    const auto close = stat.rfind(')');
+    if (close == std::string::npos) continue;
+    std::istringstream rest(stat.substr(close + 1));
+    std::string field;
+    for (int k = 3; k <= 19 && rest >> field; ++k)
+      if (k == 19) out.push_back(std::stoi(field));
+  }
+  return out;
+}
+
+// The reader decodes ahead at lower priority, so tracking and the detector win the shared cores.
+TEST(TumSequence, ReaderThreadRunsAtTheAskedNiceness) {
+  SP_REQUIRE_SHARED(kSeq / "associations.txt");
+  const std::vector<int> before = thread_nice_values();
+  ASSERT_FALSE(before.empty());
+  const int base = before.front();                        // this (main) thread
+  const int asked = std::min(std::max(base + 1, 7), 19);  // niceness is absolute (setpriority)
+  ASSERT_GT(asked, base) << "the test process already runs at niceness 19";
+  TumSequenceOptions o;
+  o.prefetch = 1;  // the reader stays alive, blocked on the full queue
+  o.reader_nice = asked;
+  TumSequence seq(kSeq, o);
+  ASSERT_TRUE(seq.next().has_value());  // the reader has started and lowered itself
+  const std::vector<int> during = thread_nice_values();
+  EXPECT_EQ(std::count(during.begin(), during.end(), asked),
+            std::count(before.begin(), before.end(), asked) + 1);
+  EXPECT_EQ(during.front(), base);  // the caller keeps its priority
 }
 
 // The reader thread blocks on the full prefetch queue; the destructor must wake and join it. The
@@ -176,7 +216,7 @@ namespace {
 TEST(TumSequenceOptions, FromYamlReadsKeysAndChecksRanges) {
   const auto r = ConfigReader::from_string(
       "prefetch: 3\nmax_frames: 10\nstart_frame: 2\ndepth_offset: -0.01\n"
-      "camera_file: cam.yaml\n",
+      "camera_file: cam.yaml\nreader_nice: 5\n",
       "opts.yaml");
   const auto o = TumSequenceOptions::from_yaml(r);
   r.finish();
@@ -185,6 +225,10 @@ TEST(TumSequenceOptions, FromYamlReadsKeysAndChecksRanges) {
   EXPECT_EQ(o.start_frame, 2u);
   EXPECT_DOUBLE_EQ(o.depth_offset, -0.01);
   EXPECT_DOUBLE_EQ(o.max_difference, 0.02);  // default kept
+  EXPECT_EQ(o.reader_nice, 5);
+  EXPECT_EQ(TumSequenceOptions{}.reader_nice, 10);  // the measured default
+  EXPECT_THROW((void)TumSequenceOptions::from_yaml(ConfigReader::from_string("reader_nice: 20\n", "o.yaml")),
+               ConfigError);
   ASSERT_TRUE(o.camera_file.has_value());
   EXPECT_EQ(*o.camera_file, std::filesystem::path("cam.yaml"));
   try {

@@ -5,6 +5,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "stillpoint/common/error.hpp"
+#include "stillpoint/common/thread_priority.hpp"
 #include "stillpoint/io/association.hpp"
 #include "stillpoint/io/jpeg_reader.hpp"
 #include "stillpoint/io/tum_text.hpp"
@@ -21,6 +22,7 @@ TumSequenceOptions TumSequenceOptions::from_yaml(const ConfigReader& r) {
   r.read("depth_offset", o.depth_offset, -1.0, 1.0);
   r.read<std::size_t>("max_frames", o.max_frames, 0, 100000000);
   r.read<std::size_t>("start_frame", o.start_frame, 0, 100000000);
+  r.read("reader_nice", o.reader_nice, 0, 19);
   return o;
 }
 
@@ -35,7 +37,10 @@ TumSequence::TumSequence(const fs::path& dir, const TumSequenceOptions& options)
   camera_ = load_camera_config(camera_file);
   load_entries(options);
   if (entries_.empty()) spdlog::warn("{}: no associated RGB-D frames", dir_.string());
-  reader_ = std::thread([this] { reader_loop(); });
+  reader_ = std::thread([this, nice = options.reader_nice] {
+    lower_this_thread_priority(nice, "sequence reader");
+    reader_loop();
+  });
 }
 
 TumSequence::~TumSequence() {

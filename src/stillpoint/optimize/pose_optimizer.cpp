@@ -19,6 +19,7 @@ struct Problem {
   const std::vector<bool>& outlier;
   const CameraModel& cam;
   double delta_mono, delta_stereo;
+  double min_relative_decrease;
   bool robust;
 };
 
@@ -65,7 +66,7 @@ void levenberg_marquardt(const Problem& p, geo::SE3& T, int iterations) {
       ne = ne_new;
       lambda = std::max(lambda * 0.1, 1e-9);
       // Converged: a negligible step or cost change (saves most iterations of later rounds).
-      if (delta.squaredNorm() < 1e-16 || decrease < 1e-8 * ne.cost) return;
+      if (delta.squaredNorm() < 1e-16 || decrease < p.min_relative_decrease * ne.cost) return;
     } else {
       lambda *= 10.0;
       if (lambda > 1e8) return;
@@ -81,6 +82,7 @@ PoseOptimizerConfig PoseOptimizerConfig::from_yaml(const ConfigReader& r) {
   r.read("iterations", c.iterations, 1, 100);
   r.read("chi2_mono", c.chi2_mono, 0.1, 1000.0);
   r.read("chi2_stereo", c.chi2_stereo, 0.1, 1000.0);
+  r.read("min_relative_decrease", c.min_relative_decrease, 0.0, 0.1);
   return c;
 }
 
@@ -102,6 +104,7 @@ PoseOptimizationResult optimize_pose(geo::SE3& T_cw, const std::vector<PoseObser
             camera,
             std::sqrt(config.chi2_mono),
             std::sqrt(config.chi2_stereo),
+            config.min_relative_decrease,
             true};
   for (int round = 0; round < config.rounds; ++round) {
     // The robust kernel is dropped in the last round: by then the outliers are out.
