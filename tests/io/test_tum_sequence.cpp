@@ -102,7 +102,7 @@ TEST(TumSequence, ReaderThreadRunsAtTheAskedNiceness) {
   ASSERT_FALSE(before.empty());
   const int base = before.front();                        // this (main) thread
   const int asked = std::min(std::max(base + 1, 7), 19);  // niceness is absolute (setpriority)
-  ASSERT_GT(asked, base) << "the test process already runs at niceness 19";
+  if (asked <= base) GTEST_SKIP() << "the test process already runs at niceness " << base;
   TumSequenceOptions o;
   o.prefetch = 1;  // the reader stays alive, blocked on the full queue
   o.reader_nice = asked;
