@@ -203,14 +203,53 @@ TEST_F(AnchorRefinerTest, DisabledOrWithoutAnchorItDoesNothing) {
   EXPECT_EQ(refiner.refine(snapshot(refiner, f), f, refined), 0);
 }
 
+// The rule for the pose solve after the alignment: aligned features alone only near an anchor (both
+// distances) and with enough of them; never without an anchor or with the rule off.
+TEST_F(AnchorRefinerTest, AlignedFeaturesAloneOnlyNearAnAnchorAndWhenEnough) {
+  AnchorRefinerConfig c;
+  c.aligned_only_min = 50;
+  c.aligned_only_max_translation_m = 0.02;
+  c.aligned_only_max_rotation_deg = 1.0;
+  AnchorRefiner refiner(c, cam_, map::ScalePyramid::make(8, 1.2));
+  const Frame f = current(shifted(anchor_image_, kShift));
+  EXPECT_FALSE(refiner.aligned_only(snapshot(refiner, f), geo::SE3(), 100)) << "no anchor yet";
+  refiner.set_anchor(anchor_id_, anchor_frame_);
+  const LocalMapSnapshot s = snapshot(refiner, f);
+  const auto moved = [](double x_m, double yaw_deg) {
+    const double a = yaw_deg * M_PI / 180.0;
+    // T_cw of a camera whose centre is at (x_m, 0, 0), turned by yaw_deg about its y axis.
+    const geo::SE3 T_wc(Eigen::AngleAxisd(a, Eigen::Vector3d::UnitY()).toRotationMatrix(),
+                        Eigen::Vector3d(x_m, 0, 0));
+    return T_wc.inverse();
+  };
+  EXPECT_TRUE(refiner.aligned_only(s, moved(0.0, 0.0), 50));
+  EXPECT_FALSE(refiner.aligned_only(s, moved(0.0, 0.0), 49)) << "too few aligned";
+  EXPECT_TRUE(refiner.aligned_only(s, moved(0.019, 0.9), 200));
+  EXPECT_FALSE(refiner.aligned_only(s, moved(0.021, 0.0), 200)) << "camera centre 2.1 cm away";
+  EXPECT_FALSE(refiner.aligned_only(s, moved(0.0, 1.1), 200)) << "turned 1.1 deg";
+  AnchorRefinerConfig never = c;
+  never.aligned_only_min = 0;
+  AnchorRefiner off(never, cam_, map::ScalePyramid::make(8, 1.2));
+  off.set_anchor(anchor_id_, anchor_frame_);
+  EXPECT_FALSE(off.aligned_only(snapshot(off, f), geo::SE3(), 200));
+}
+
 TEST(AnchorRefinerConfig, KeysAreReadAndRangeChecked) {
   const AnchorRefinerConfig c = AnchorRefinerConfig::from_yaml(ConfigReader::from_string(
-      "anchors: 2\nwindow: 15\nmax_shift: 2\nlevel0_weight: false\n", "subpixel.yaml"));
+      "anchors: 2\nwindow: 15\nmax_shift: 2\nlevel0_weight: false\naligned_only_min: 80\n"
+      "aligned_only_max_translation_m: 0.01\naligned_only_max_rotation_deg: 0.5\n",
+      "subpixel.yaml"));
   EXPECT_EQ(c.anchors, 2);
   EXPECT_EQ(c.window, 15);
   EXPECT_DOUBLE_EQ(c.max_shift, 2.0);
   EXPECT_FALSE(c.level0_weight);
+  EXPECT_EQ(c.aligned_only_min, 80);
+  EXPECT_DOUBLE_EQ(c.aligned_only_max_translation_m, 0.01);
+  EXPECT_DOUBLE_EQ(c.aligned_only_max_rotation_deg, 0.5);
   EXPECT_THROW(AnchorRefinerConfig::from_yaml(ConfigReader::from_string("window: 2\n", "subpixel.yaml")),
+               std::exception);
+  EXPECT_THROW(AnchorRefinerConfig::from_yaml(
+                   ConfigReader::from_string("aligned_only_max_translation_m: -1\n", "subpixel.yaml")),
                std::exception);
 }
 

@@ -480,7 +480,8 @@ nlohmann::json SlamSystem::statistics() {
   j["subpixel"] = {{"enabled", config_.tracker.subpixel.enabled},
                    {"frames", tracker_.subpixel_stats().frames},
                    {"candidates", tracker_.subpixel_stats().candidates},
-                   {"refined", tracker_.subpixel_stats().refined}};
+                   {"refined", tracker_.subpixel_stats().refined},
+                   {"aligned_only_solves", tracker_.subpixel_stats().aligned_only_solves}};
   j["keyframes_created"] = keyframes_created_;
   j["keyframe_policy"] = tracker_.policy().name();
   j["keyframe_rules"] = nlohmann::json::object();  // how often each rule of the policy fired

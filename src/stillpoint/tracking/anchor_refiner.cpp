@@ -21,6 +21,9 @@ AnchorRefinerConfig AnchorRefinerConfig::from_yaml(const ConfigReader& r) {
   r.read("refined_weight", c.refined_weight, 0.1, 100.0);
   r.read("max_round_trip", c.max_round_trip, 0.0, 10.0);
   r.read("skip_suspect", c.skip_suspect);
+  r.read("aligned_only_min", c.aligned_only_min, 0, 100000);
+  r.read("aligned_only_max_translation_m", c.aligned_only_max_translation_m, 0.0, 1.0);
+  r.read("aligned_only_max_rotation_deg", c.aligned_only_max_rotation_deg, 0.0, 45.0);
   return c;
 }
 
@@ -45,6 +48,21 @@ void AnchorRefiner::set_anchor(map::KeyframeId id, const Frame& frame) {
                               config_.pyramid_levels);
   a.raw.resize(frame.features.size());
   for (std::size_t i = 0; i < frame.features.size(); ++i) a.raw[i] = raw(frame.features.keypoints[i].pt);
+}
+
+bool AnchorRefiner::aligned_only(const LocalMapSnapshot& map, const geo::SE3& T_cw, int aligned) const {
+  if (config_.aligned_only_min <= 0 || aligned < config_.aligned_only_min) return false;
+  for (const Anchor& a : anchors_) {
+    const LocalMapSnapshot::Pose* kf = map.pose(a.id);
+    if (kf == nullptr || kf->bad) continue;
+    const geo::SE3 relative = T_cw * kf->T_cw.inverse();
+    const double angle_deg = geo::so3_log(relative.rotation()).norm() * 180.0 / M_PI;
+    const double distance_m = (T_cw.inverse().translation() - kf->T_cw.inverse().translation()).norm();
+    if (distance_m <= config_.aligned_only_max_translation_m &&
+        angle_deg <= config_.aligned_only_max_rotation_deg)
+      return true;
+  }
+  return false;
 }
 
 std::vector<map::KeyframeId> AnchorRefiner::anchor_ids() const {

@@ -35,13 +35,21 @@ struct AnchorRefinerConfig {
   bool skip_suspect = true;          // features near detected objects or moving flow keep their detection
   bool level0_weight = true;         // refined features weighted as level 0 in pose optimisation
   double refined_weight = 1.0;       // ... times this (LK positions are more precise than detections)
+  // Near an anchor (within both distances), with at least `aligned_only_min` aligned features, the pose
+  // solve after the alignment uses the aligned features alone: there the unaligned ones (whole-pixel
+  // detections, points the anchor does not see, suspects) only add noise. Farther away the aligned set
+  // is smaller and a translation-only warp can bias it, so every feature stays. 0 min: never.
+  int aligned_only_min = 0;
+  double aligned_only_max_translation_m = 0.02;
+  double aligned_only_max_rotation_deg = 1.0;
   static AnchorRefinerConfig from_yaml(const ConfigReader& r);
 };
 
 struct AnchorRefinerStats {
-  std::size_t frames = 0;      // frames with an anchor to refine against
-  std::size_t candidates = 0;  // inlier features whose point the anchor observes, geometry valid
-  std::size_t refined = 0;     // ... moved to their aligned position
+  std::size_t frames = 0;               // frames with an anchor to refine against
+  std::size_t candidates = 0;           // inlier features whose point the anchor observes, geometry valid
+  std::size_t refined = 0;              // ... moved to their aligned position
+  std::size_t aligned_only_solves = 0;  // pose solves that used the aligned features alone
 };
 
 class AnchorRefiner {
@@ -62,7 +70,12 @@ class AnchorRefiner {
   // Returns how many moved. Reads the map only through the snapshot (no lock held).
   int refine(const LocalMapSnapshot& map, Frame& frame, std::vector<bool>& refined);
 
+  // Whether the pose solve that follows refine() should use the aligned features alone: the camera
+  // is near an anchor and `aligned` (features refine() moved) is at least aligned_only_min.
+  [[nodiscard]] bool aligned_only(const LocalMapSnapshot& map, const geo::SE3& T_cw, int aligned) const;
+
   [[nodiscard]] const AnchorRefinerStats& stats() const { return stats_; }
+  void count_aligned_only_solve() { ++stats_.aligned_only_solves; }
   [[nodiscard]] const AnchorRefinerConfig& config() const { return config_; }
 
  private:

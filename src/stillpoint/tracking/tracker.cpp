@@ -348,6 +348,29 @@ int Tracker::optimize_pose(Frame& frame) {
     feature_of.push_back(i);
   }
   if (obs.size() < 3) return 0;
+  if (refined_.size() == frame.points.size()) {
+    int aligned = 0;
+    for (std::size_t i : feature_of) aligned += refined_[i] ? 1 : 0;
+    if (refiner_.aligned_only(snapshot_, frame.T_cw, aligned)) {
+      // The unaligned features stay matched but leave this solve.
+      refiner_.count_aligned_only_solve();
+      std::size_t kept = 0;
+      for (std::size_t k = 0; k < obs.size(); ++k) {
+        if (!refined_[feature_of[k]]) {
+          // Counted as tracked whatever the solve before said: keeping that status instead gains a
+          // third as much on still cameras (docs/tracking_precision.md), so part of the gain is
+          // here, in what the next frame and the keyframe policy see.
+          frame.outlier[feature_of[k]] = false;
+          continue;
+        }
+        obs[kept] = obs[k];
+        feature_of[kept] = feature_of[k];
+        ++kept;
+      }
+      obs.resize(kept);
+      feature_of.resize(kept);
+    }
+  }
   const auto result = opt::optimize_pose(frame.T_cw, obs, camera_model_, config_.pose);
   int inliers = 0;
   for (std::size_t k = 0; k < obs.size(); ++k) {
