@@ -36,9 +36,10 @@ struct AnchorRefinerConfig {
   bool level0_weight = true;         // refined features weighted as level 0 in pose optimisation
   double refined_weight = 1.0;       // ... times this (LK positions are more precise than detections)
   // Near an anchor (within both distances), with at least `aligned_only_min` aligned features, the pose
-  // solve after the alignment uses the aligned features alone: there the unaligned ones (whole-pixel
-  // detections, points the anchor does not see, suspects) only add noise. Farther away the aligned set
-  // is smaller and a translation-only warp can bias it, so every feature stays. 0 min: never.
+  // solve after the alignment uses the aligned features alone (the unaligned ones count as tracked).
+  // Farther away the aligned set is smaller and a translation-only warp can bias it, so every feature
+  // stays. 0 min: never, the default: most of its gain is fewer keyframes on a still camera, and with
+  // it a revisit adds keyframes (docs/tracking_precision.md).
   int aligned_only_min = 0;
   double aligned_only_max_translation_m = 0.02;
   double aligned_only_max_rotation_deg = 1.0;
