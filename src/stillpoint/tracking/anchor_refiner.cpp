@@ -4,6 +4,8 @@
 #include <cmath>
 #include <opencv2/video/tracking.hpp>
 
+#include "stillpoint/tracking/pose_guard.hpp"
+
 namespace sp::track {
 
 AnchorRefinerConfig AnchorRefinerConfig::from_yaml(const ConfigReader& r) {
@@ -55,11 +57,9 @@ bool AnchorRefiner::aligned_only(const LocalMapSnapshot& map, const geo::SE3& T_
   for (const Anchor& a : anchors_) {
     const LocalMapSnapshot::Pose* kf = map.pose(a.id);
     if (kf == nullptr || kf->bad) continue;
-    const geo::SE3 relative = T_cw * kf->T_cw.inverse();
-    const double angle_deg = geo::so3_log(relative.rotation()).norm() * 180.0 / M_PI;
-    const double distance_m = (T_cw.inverse().translation() - kf->T_cw.inverse().translation()).norm();
-    if (distance_m <= config_.aligned_only_max_translation_m &&
-        angle_deg <= config_.aligned_only_max_rotation_deg)
+    const PoseDeviation d = pose_deviation(T_cw, kf->T_cw);
+    if (d.translation_m <= config_.aligned_only_max_translation_m &&
+        d.rotation_deg <= config_.aligned_only_max_rotation_deg)
       return true;
   }
   return false;

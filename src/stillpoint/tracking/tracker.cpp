@@ -348,7 +348,7 @@ int Tracker::optimize_pose(Frame& frame) {
     feature_of.push_back(i);
   }
   if (obs.size() < 3) return 0;
-  if (refined_.size() == frame.points.size()) {
+  if (config_.subpixel.aligned_only_min > 0 && refined_.size() == frame.points.size()) {
     int aligned = 0;
     for (std::size_t i : feature_of) aligned += refined_[i] ? 1 : 0;
     if (refiner_.aligned_only(snapshot_, frame.T_cw, aligned)) {
