@@ -237,7 +237,8 @@ TEST_F(AnchorRefinerTest, AlignedFeaturesAloneOnlyNearAnAnchorAndWhenEnough) {
 TEST(AnchorRefinerConfig, KeysAreReadAndRangeChecked) {
   const AnchorRefinerConfig c = AnchorRefinerConfig::from_yaml(ConfigReader::from_string(
       "anchors: 2\nwindow: 15\nmax_shift: 2\nlevel0_weight: false\naligned_only_min: 80\n"
-      "aligned_only_max_translation_m: 0.01\naligned_only_max_rotation_deg: 0.5\n",
+      "aligned_only_max_translation_m: 0.01\naligned_only_max_rotation_deg: 0.5\n"
+      "aligned_only_unaligned: tracked\n",
       "subpixel.yaml"));
   EXPECT_EQ(c.anchors, 2);
   EXPECT_EQ(c.window, 15);
@@ -246,6 +247,10 @@ TEST(AnchorRefinerConfig, KeysAreReadAndRangeChecked) {
   EXPECT_EQ(c.aligned_only_min, 80);
   EXPECT_DOUBLE_EQ(c.aligned_only_max_translation_m, 0.01);
   EXPECT_DOUBLE_EQ(c.aligned_only_max_rotation_deg, 0.5);
+  EXPECT_EQ(c.aligned_only_unaligned, "tracked");
+  EXPECT_THROW(AnchorRefinerConfig::from_yaml(
+                   ConfigReader::from_string("aligned_only_unaligned: dropped\n", "subpixel.yaml")),
+               std::exception);
   EXPECT_THROW(AnchorRefinerConfig::from_yaml(ConfigReader::from_string("window: 2\n", "subpixel.yaml")),
                std::exception);
   EXPECT_THROW(AnchorRefinerConfig::from_yaml(

@@ -207,12 +207,11 @@ TEST(AdaptivePolicy, CountsTheRuleThatDecided) {
   c.mapping_idle = false;
   c.mapping_queue = 5;  // swamped
   EXPECT_FALSE(policy->decide(c));
-  const KeyframeRuleCounts expected = {{"decisions", 4},        {"vetoed_weak", 1},
-                                       {"vetoed_swamped", 1},   {"close_points", 0},
-                                       {"weak_tracking", 1},    {"any_effective", 0},
-                                       {"threshold_met", 0},    {"threshold_met_not_spread", 0},
-                                       {"effective_spread", 0}, {"reference_fallback", 1},
-                                       {"inserted", 2}};
+  const KeyframeRuleCounts expected = {
+      {"decisions", 4},           {"vetoed_weak", 1},        {"vetoed_swamped", 1},
+      {"vetoed_at_reference", 0}, {"close_points", 0},       {"weak_tracking", 1},
+      {"any_effective", 0},       {"threshold_met", 0},      {"threshold_met_not_spread", 0},
+      {"effective_spread", 0},    {"reference_fallback", 1}, {"inserted", 2}};
   EXPECT_EQ(policy->rule_counts(), expected);
 }
 
@@ -222,10 +221,72 @@ TEST(HeuristicPolicy, CountsInsertionsAndTheirConditions) {
   EXPECT_FALSE(policy->decide(c));
   c.tracked_inliers = 200;
   EXPECT_TRUE(policy->decide(c));  // mapping idle and losing the reference
-  const KeyframeRuleCounts expected = {
-      {"decisions", 2},          {"vetoed_weak", 0},           {"vetoed_swamped", 0},        {"inserted", 1},
-      {"inserted_timed_out", 0}, {"inserted_mapping_idle", 1}, {"inserted_weak_or_close", 0}};
+  const KeyframeRuleCounts expected = {{"decisions", 2},
+                                       {"vetoed_weak", 0},
+                                       {"vetoed_swamped", 0},
+                                       {"vetoed_at_reference", 0},
+                                       {"inserted", 1},
+                                       {"inserted_timed_out", 0},
+                                       {"inserted_mapping_idle", 1},
+                                       {"inserted_weak_or_close", 0}};
   EXPECT_EQ(policy->rule_counts(), expected);
+}
+
+// A camera still at its reference keyframe's place makes no keyframe while it tracks enough inliers,
+// whatever rule would have fired; one step outside either distance, or below the inlier count, the
+// rules decide again.
+TEST(KeyframePolicies, HoldWhileAtTheReferenceKeyframesPlace) {
+  for (const std::string name : {"adaptive", "heuristic"}) {
+    SCOPED_TRACE(name);
+    KeyframePolicyConfig cfg;
+    cfg.policy = name;
+    cfg.hold_min_tracked = 100;
+    cfg.hold_max_translation_m = 0.02;
+    cfg.hold_max_rotation_deg = 1.0;
+    auto policy = make_keyframe_policy(cfg);
+    KeyframeCandidate c = healthy_candidate();
+    c.tracked_inliers = 200;  // < 0.75 * 350 with mapping idle: both policies insert
+    ASSERT_TRUE(policy->decide(c)) << "place unknown: never held";
+    c.reference_translation_m = 0.019;
+    c.reference_rotation_deg = 0.9;
+    EXPECT_FALSE(policy->decide(c)) << "at the reference's place";
+    c.close_tracked = 50;
+    c.close_untracked = 200;
+    EXPECT_FALSE(policy->decide(c)) << "held even when close points run out";
+    c = healthy_candidate();
+    c.tracked_inliers = 200;
+    c.reference_translation_m = 0.021;
+    c.reference_rotation_deg = 0.0;
+    EXPECT_TRUE(policy->decide(c)) << "2.1 cm away";
+    c.reference_translation_m = 0.0;
+    c.reference_rotation_deg = 1.1;
+    EXPECT_TRUE(policy->decide(c)) << "turned 1.1 deg";
+    c.reference_rotation_deg = 0.0;
+    c.tracked_inliers = 99;
+    EXPECT_TRUE(policy->decide(c)) << "tracking fewer than hold_min_tracked";
+    long held = -1;
+    for (const auto& [rule, n] : policy->rule_counts())
+      if (rule == "vetoed_at_reference") held = static_cast<long>(n);
+    EXPECT_EQ(held, 2);
+    KeyframePolicyConfig off = cfg;
+    off.hold_min_tracked = 0;
+    c.tracked_inliers = 200;
+    EXPECT_TRUE(make_keyframe_policy(off)->decide(c)) << "hold_min_tracked 0: never held";
+  }
+}
+
+TEST(KeyframePolicyConfig, HoldKeysAreReadAndRangeChecked) {
+  const KeyframePolicyConfig c = KeyframePolicyConfig::from_yaml(ConfigReader::from_string(
+      "policy: adaptive\nhold_min_tracked: 120\nhold_max_translation_m: 0.01\nhold_max_rotation_deg: 0.5\n",
+      "keyframes.yaml"));
+  EXPECT_EQ(c.hold_min_tracked, 120);
+  EXPECT_DOUBLE_EQ(c.hold_max_translation_m, 0.01);
+  EXPECT_DOUBLE_EQ(c.hold_max_rotation_deg, 0.5);
+  EXPECT_THROW(KeyframePolicyConfig::from_yaml(ConfigReader::from_string("hold_min_tracked: -1\n", "k.yaml")),
+               std::exception);
+  EXPECT_THROW(
+      KeyframePolicyConfig::from_yaml(ConfigReader::from_string("hold_max_rotation_deg: 90\n", "k.yaml")),
+      std::exception);
 }
 
 TEST(AdaptivePolicy, SafetyNetInsertsWhenCloseTrackedPointsRunOut) {

@@ -26,6 +26,7 @@ AnchorRefinerConfig AnchorRefinerConfig::from_yaml(const ConfigReader& r) {
   r.read("aligned_only_min", c.aligned_only_min, 0, 100000);
   r.read("aligned_only_max_translation_m", c.aligned_only_max_translation_m, 0.0, 1.0);
   r.read("aligned_only_max_rotation_deg", c.aligned_only_max_rotation_deg, 0.0, 45.0);
+  r.read_choice("aligned_only_unaligned", c.aligned_only_unaligned, {"kept", "tracked"});
   return c;
 }
 

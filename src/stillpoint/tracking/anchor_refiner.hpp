@@ -10,6 +10,7 @@
 // reference, so the positions are sub-pixel and do not drift. Only where a translation-only patch
 // alignment is valid: small roll and scale change and a small view change since the anchor.
 #include <opencv2/core.hpp>
+#include <string>
 #include <vector>
 
 #include "stillpoint/common/config_reader.hpp"
@@ -36,13 +37,15 @@ struct AnchorRefinerConfig {
   bool level0_weight = true;         // refined features weighted as level 0 in pose optimisation
   double refined_weight = 1.0;       // ... times this (LK positions are more precise than detections)
   // Near an anchor (within both distances), with at least `aligned_only_min` aligned features, the pose
-  // solve after the alignment uses the aligned features alone (the unaligned ones count as tracked).
-  // Farther away the aligned set is smaller and a translation-only warp can bias it, so every feature
-  // stays. 0 min: never, the default: most of its gain is fewer keyframes on a still camera, and with
-  // it a revisit adds keyframes (docs/tracking_precision.md).
+  // solve after the alignment uses the aligned features alone. Farther away the aligned set is smaller
+  // and a translation-only warp can bias it, so every feature stays. 0 min: never.
   int aligned_only_min = 0;
   double aligned_only_max_translation_m = 0.02;
   double aligned_only_max_rotation_deg = 1.0;
+  // What the unaligned features left out of that solve are: "kept" (the inlier/outlier status of the
+  // solve before) or "tracked" (all inliers; the first version: a still camera then keeps one keyframe,
+  // but a replayed start adds keyframes to the map it revisits; docs/tracking_precision.md).
+  std::string aligned_only_unaligned = "kept";
   static AnchorRefinerConfig from_yaml(const ConfigReader& r);
 };
 

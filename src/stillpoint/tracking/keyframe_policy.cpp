@@ -24,6 +24,9 @@ KeyframePolicyConfig KeyframePolicyConfig::from_yaml(const ConfigReader& r) {
   r.read_choice("effective_reference", c.effective_reference, {"keyframe", "point"});
   r.read("effective_share", c.effective_share, 0.0, 1.0);
   r.read("effective_min", c.effective_min, 0, 10000);
+  r.read("hold_min_tracked", c.hold_min_tracked, 0, 100000);
+  r.read("hold_max_translation_m", c.hold_max_translation_m, 0.0, 1.0);
+  r.read("hold_max_rotation_deg", c.hold_max_rotation_deg, 0.0, 45.0);
   return c;
 }
 
@@ -34,6 +37,7 @@ namespace {
 struct SafetyNets {
   bool weak = false;
   bool swamped = false;
+  bool at_reference = false;
   bool need_close = false;
   bool losing_reference = false;
   bool timed_out = false;
@@ -43,6 +47,9 @@ SafetyNets safety_nets(const KeyframePolicyConfig& cfg, const KeyframeCandidate&
   SafetyNets s;
   s.weak = c.tracked_inliers <= cfg.min_inliers;
   s.swamped = !c.mapping_idle && c.mapping_queue >= cfg.max_mapping_queue;
+  s.at_reference = cfg.hold_min_tracked > 0 && c.tracked_inliers >= cfg.hold_min_tracked &&
+                   c.reference_translation_m <= cfg.hold_max_translation_m &&
+                   c.reference_rotation_deg <= cfg.hold_max_rotation_deg;
   s.need_close = c.close_tracked < cfg.close_tracked_min && c.close_untracked > cfg.close_untracked_min;
   const double ratio = c.keyframes_in_map < 2 ? 0.4 : cfg.reference_ratio;
   s.losing_reference = c.tracked_inliers < ratio * c.reference_tracked;
@@ -78,7 +85,8 @@ class HeuristicPolicy final : public KeyframePolicy {
     const SafetyNets s = safety_nets(cfg_, c);
     if (s.weak) counter_.fire(kVetoedWeak);
     if (s.swamped) counter_.fire(kVetoedSwamped);
-    if (s.weak || s.swamped) return false;
+    if (s.at_reference) counter_.fire(kVetoedAtReference);
+    if (s.weak || s.swamped || s.at_reference) return false;
     // ORB-SLAM3 RGB-D: (c1a || c1b || c1c) && c2.
     const bool c1a = s.timed_out;
     const bool c1b =
@@ -101,14 +109,15 @@ class HeuristicPolicy final : public KeyframePolicy {
     kDecisions,
     kVetoedWeak,
     kVetoedSwamped,
+    kVetoedAtReference,
     kInserted,
     kTimedOut,
     kMappingIdle,
     kWeakOrClose
   };
   KeyframePolicyConfig cfg_;
-  RuleCounter<7> counter_{{"decisions", "vetoed_weak", "vetoed_swamped", "inserted", "inserted_timed_out",
-                           "inserted_mapping_idle", "inserted_weak_or_close"}};
+  RuleCounter<8> counter_{{"decisions", "vetoed_weak", "vetoed_swamped", "vetoed_at_reference", "inserted",
+                           "inserted_timed_out", "inserted_mapping_idle", "inserted_weak_or_close"}};
 };
 
 // Paper §III-A. A tracked point is "effective" when its viewing direction changed by more than
@@ -129,6 +138,10 @@ class AdaptivePolicy final : public KeyframePolicy {
     const SafetyNets s = safety_nets(cfg_, c);
     if (s.weak || s.swamped) {
       counter_.fire(s.weak ? kVetoedWeak : kVetoedSwamped);
+      return false;
+    }
+    if (s.at_reference) {
+      counter_.fire(kVetoedAtReference);
       return false;
     }
     if (s.need_close) return inserted(kClosePoints);
@@ -159,6 +172,7 @@ class AdaptivePolicy final : public KeyframePolicy {
     kDecisions,
     kVetoedWeak,
     kVetoedSwamped,
+    kVetoedAtReference,
     kClosePoints,
     kWeakTracking,
     kAnyEffective,
@@ -174,9 +188,10 @@ class AdaptivePolicy final : public KeyframePolicy {
     return true;
   }
   KeyframePolicyConfig cfg_;
-  RuleCounter<11> counter_{{"decisions", "vetoed_weak", "vetoed_swamped", "close_points", "weak_tracking",
-                            "any_effective", "threshold_met", "threshold_met_not_spread", "effective_spread",
-                            "reference_fallback", "inserted"}};
+  RuleCounter<12> counter_{{"decisions", "vetoed_weak", "vetoed_swamped", "vetoed_at_reference",
+                            "close_points", "weak_tracking", "any_effective", "threshold_met",
+                            "threshold_met_not_spread", "effective_spread", "reference_fallback",
+                            "inserted"}};
 };
 
 }  // namespace

@@ -2,6 +2,7 @@
 // When does the tracker hand a new keyframe to local mapping? Two policies behind one interface:
 // ORB-SLAM3's RGB-D heuristics and the paper's adaptive-threshold selection (§III-A).
 #include <Eigen/Core>
+#include <limits>
 #include <memory>
 #include <string>
 #include <utility>
@@ -28,6 +29,9 @@ struct KeyframeCandidate {
   bool mapping_idle = true;
   std::size_t mapping_queue = 0;
   int image_width = 640, image_height = 480;
+  // How far the frame is from its reference keyframe (camera centre, rotation); unknown: infinite.
+  double reference_translation_m = std::numeric_limits<double>::infinity();
+  double reference_rotation_deg = std::numeric_limits<double>::infinity();
   std::vector<ViewChange> view_changes;  // filled only for policies that ask for it
 };
 
@@ -47,6 +51,13 @@ struct KeyframePolicyConfig {
   std::string effective_reference = "keyframe";
   double effective_share = 0.25;  // effective points needed, as a share of the tracked inliers
   int effective_min = 20;         // ... and never fewer than this
+  // Both policies: no keyframe while the camera is still at its reference keyframe's place (within both
+  // distances) tracking at least hold_min_tracked inliers: a new keyframe there sees nothing new, and
+  // on a still camera each one re-anchors the sub-pixel alignment to a noisier pose
+  // (docs/tracking_precision.md). 0: never held.
+  int hold_min_tracked = 0;
+  double hold_max_translation_m = 0.02;
+  double hold_max_rotation_deg = 1.0;
   static KeyframePolicyConfig from_yaml(const ConfigReader& r);
 };
 

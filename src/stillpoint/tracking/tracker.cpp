@@ -355,12 +355,10 @@ int Tracker::optimize_pose(Frame& frame) {
       // The unaligned features stay matched but leave this solve.
       refiner_.count_aligned_only_solve();
       std::size_t kept = 0;
+      const bool unaligned_tracked = config_.subpixel.aligned_only_unaligned == "tracked";
       for (std::size_t k = 0; k < obs.size(); ++k) {
         if (!refined_[feature_of[k]]) {
-          // Counted as tracked whatever the solve before said: keeping that status instead gains a
-          // third as much on still cameras (docs/tracking_precision.md), so part of the gain is
-          // here, in what the next frame and the keyframe policy see.
-          frame.outlier[feature_of[k]] = false;
+          if (unaligned_tracked) frame.outlier[feature_of[k]] = false;
           continue;
         }
         obs[kept] = obs[k];
@@ -547,6 +545,11 @@ bool Tracker::need_keyframe(const map::MapReader& view, const Frame& frame,
   c.mapping_queue = mapping.queue;
   c.image_width = camera_.width;
   c.image_height = camera_.height;
+  if (const map::Keyframe* ref = view.keyframe(reference_); ref != nullptr) {
+    const PoseDeviation d = pose_deviation(frame.T_cw, ref->T_cw);
+    c.reference_translation_m = d.translation_m;
+    c.reference_rotation_deg = d.rotation_deg;
+  }
   for (std::size_t i = 0; i < frame.features.size(); ++i) {
     const float d = frame.features.depth[i];
     if (d <= 0 || d > depth_.close_depth) continue;
