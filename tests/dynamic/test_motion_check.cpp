@@ -327,6 +327,50 @@ TEST(MotionCheck, PausingPersonIsHeldDynamicThenReleased) {
   }
 }
 
+// A walking person (the patch, boxed as a person) that the detector finds on frames 1-2 and misses
+// from frame 3 on: with coast_frames its box is carried by the flow of its points, stays dynamic and
+// follows the person for coast_frames frames after the last detection, then ends; without, the person
+// is unboxed from the first miss.
+TEST(MotionCheck, MissedDetectionOfAMovingPersonIsCoasted) {
+  const Scene s;
+  std::vector<Rendered> frames;
+  for (int i = 0; i < 7; ++i)
+    frames.push_back(test::render(s.planes({0.02 * i, 0}), Eigen::Isometry3d::Identity()));
+  const auto kps = test::grid_keypoints(640, 480, 8);
+  for (int coast : {0, 3}) {
+    SCOPED_TRACE(coast);
+    MotionCheckConfig cfg;
+    cfg.coast_frames = coast;
+    DynamicFeatureFilter f(cfg);
+    for (std::size_t i = 1; i < frames.size(); ++i) {
+      Detections det;
+      det.frame_index = i;
+      const cv::Rect2f truth = test::label_box(frames[i].label, 2);
+      if (i <= 2) det.items = {{truth, 0, 0.9f}};
+      DynamicInput in;
+      in.frame_index = i;
+      in.prev_gray = &frames[i - 1].gray;
+      in.gray = &frames[i].gray;
+      in.depth = &frames[i].depth;
+      in.K = test::test_K();
+      in.keypoints = &kps;
+      in.detections = &det;
+      const DynamicResult r = f.process(in);
+      const bool coasting = i > 2 && static_cast<int>(i - 2) <= coast;
+      if (i <= 2 || coasting) {
+        ASSERT_EQ(r.boxes.size(), 1u) << "frame " << i;
+        EXPECT_TRUE(r.box_dynamic[0]) << "frame " << i;
+        // The box follows the person (5.3 px per frame): its centre within 2 px of the truth's.
+        const cv::Point2f c = (r.boxes[0].box.tl() + r.boxes[0].box.br()) * 0.5f;
+        const cv::Point2f t = (truth.tl() + truth.br()) * 0.5f;
+        EXPECT_LT(cv::norm(c - t), 2.0) << "frame " << i;
+      } else {
+        EXPECT_TRUE(r.boxes.empty()) << "frame " << i;
+      }
+    }
+  }
+}
+
 // Frame i of a static camera watching a still scene: the same image as previous and current frame.
 DynamicInput still_input(const Rendered& f, std::size_t i, const std::vector<cv::KeyPoint>* kps,
                          const Detections* det) {

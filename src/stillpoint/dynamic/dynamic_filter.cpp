@@ -154,36 +154,68 @@ void DynamicFeatureFilter::reset() {
   cached_pyr_.clear();
 }
 
+namespace {
+
+// Moves a box over one flow step by the flow of the points inside it; false (box unchanged) when fewer
+// than 3 points are there to follow.
+bool carry_box(cv::Rect2f& box, const std::vector<cv::Point2f>& prev, const std::vector<cv::Point2f>& cur) {
+  std::vector<std::size_t> in;
+  for (std::size_t i = 0; i < prev.size(); ++i) {
+    if (inside(box, prev[i])) in.push_back(i);
+  }
+  if (in.size() < 3) return false;
+  std::vector<float> px, py, cx, cy;
+  for (std::size_t i : in) {
+    px.push_back(prev[i].x), py.push_back(prev[i].y);
+    cx.push_back(cur[i].x), cy.push_back(cur[i].y);
+  }
+  // The points' median moves by the median flow; the box also scales by the median change of
+  // the points' distances to it (a person walking towards the camera grows between detections).
+  const cv::Point2f c_prev(median_of(px), median_of(py)), c_cur(median_of(cx), median_of(cy));
+  std::vector<float> ratios;
+  for (std::size_t i : in) {
+    const float r_prev = static_cast<float>(cv::norm(prev[i] - c_prev));
+    if (r_prev > 8.f) ratios.push_back(static_cast<float>(cv::norm(cur[i] - c_cur)) / r_prev);
+  }
+  const float scale = ratios.size() >= 3 ? std::clamp(median_of(ratios), 0.8f, 1.25f) : 1.f;
+  // The box corner keeps its offset from the points' median, scaled.
+  box.x = c_cur.x + (box.x - c_prev.x) * scale;
+  box.y = c_cur.y + (box.y - c_prev.y) * scale;
+  box.width *= scale;
+  box.height *= scale;
+  return true;
+}
+
+}  // namespace
+
 std::vector<Detection> DynamicFeatureFilter::carry_boxes(const Detections& d, std::size_t to_frame) const {
   std::vector<Detection> out = d.items;
   for (const FlowStep& step : history_) {
     if (step.frame_index <= d.frame_index || step.frame_index > to_frame) continue;
-    for (Detection& det : out) {
-      std::vector<std::size_t> in;
-      for (std::size_t i = 0; i < step.prev.size(); ++i) {
-        if (inside(det.box, step.prev[i])) in.push_back(i);
-      }
-      if (in.size() < 3) continue;  // nothing to follow: leave the box where it is
-      std::vector<float> px, py, cx, cy;
-      for (std::size_t i : in) {
-        px.push_back(step.prev[i].x), py.push_back(step.prev[i].y);
-        cx.push_back(step.cur[i].x), cy.push_back(step.cur[i].y);
-      }
-      // The points' median moves by the median flow; the box also scales by the median change of
-      // the points' distances to it (a person walking towards the camera grows between detections).
-      const cv::Point2f c_prev(median_of(px), median_of(py)), c_cur(median_of(cx), median_of(cy));
-      std::vector<float> ratios;
-      for (std::size_t i : in) {
-        const float r_prev = static_cast<float>(cv::norm(step.prev[i] - c_prev));
-        if (r_prev > 8.f) ratios.push_back(static_cast<float>(cv::norm(step.cur[i] - c_cur)) / r_prev);
-      }
-      const float scale = ratios.size() >= 3 ? std::clamp(median_of(ratios), 0.8f, 1.25f) : 1.f;
-      // The box corner keeps its offset from the points' median, scaled.
-      det.box.x = c_cur.x + (det.box.x - c_prev.x) * scale;
-      det.box.y = c_cur.y + (det.box.y - c_prev.y) * scale;
-      det.box.width *= scale;
-      det.box.height *= scale;
-    }
+    for (Detection& det : out) carry_box(det.box, step.prev, step.cur);
+  }
+  return out;
+}
+
+std::vector<Detection> DynamicFeatureFilter::coast_boxes(const std::vector<Detection>& detected,
+                                                         std::size_t frame) const {
+  std::vector<Detection> out;
+  if (cfg_.coast_frames <= 0 || history_.empty() || history_.back().frame_index != frame) return out;
+  const FlowStep& step = history_.back();
+  for (const BoxTrack& t : tracks_) {
+    // Followed up to the previous frame, moved lately, detected recently enough.
+    if (t.last_seen_frame + 1 != frame || !t.last_dynamic_frame) continue;
+    if (frame - *t.last_dynamic_frame > static_cast<std::size_t>(cfg_.dynamic_hold_frames)) continue;
+    if (frame - t.last_detected_frame > static_cast<std::size_t>(cfg_.coast_frames)) continue;
+    Detection det;
+    det.box = t.box;
+    det.class_id = t.class_id;
+    det.score = 0.f;  // not a detection
+    if (!carry_box(det.box, step.prev, step.cur)) continue;
+    const bool covered = std::any_of(detected.begin(), detected.end(), [&](const Detection& d) {
+      return d.class_id == det.class_id && iou(d.box, det.box) > 0.3f;
+    });
+    if (!covered) out.push_back(det);
   }
   return out;
 }
@@ -268,6 +300,10 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
 
   // 2. Candidate boxes, carried from the detection's frame to this one.
   if (use_boxes && in.detections != nullptr) res.boxes = carry_boxes(*in.detections, in.frame_index);
+  const std::size_t n_detected = res.boxes.size();  // the boxes after these are coasted, not detected
+  if (use_boxes && do_flow) {
+    for (Detection& det : coast_boxes(res.boxes, in.frame_index)) res.boxes.push_back(det);
+  }
   const auto margin = static_cast<float>(cfg_.box_margin_px);
   const std::size_t n = cur.size();
   std::vector<bool> in_box(n, false);
@@ -367,13 +403,14 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
       if (!track_used[t] && tracks_[t].class_id == det.class_id && o > best_iou) best_iou = o, match = t;
     }
     if (match == tracks_.size()) {
-      tracks_.push_back({det.box, det.class_id, in.frame_index, std::nullopt, 0});
+      tracks_.push_back({det.box, det.class_id, in.frame_index, in.frame_index, std::nullopt, 0});
       track_used.push_back(false);
     }
     track_used[match] = true;
     BoxTrack& track = tracks_[match];
     track.box = det.box;
     track.last_seen_frame = in.frame_index;
+    if (b < n_detected) track.last_detected_frame = in.frame_index;
     if (seen == Seen::kMoving) {
       track.last_dynamic_frame = in.frame_index;
       track.static_streak = 0;

@@ -76,6 +76,10 @@ struct MotionCheckConfig {
   int cluster_min_points = 3;       // [1, 100] (counting itself)
   double box_margin_px = 4.0;       // boxes are grown by this for keypoint tests [0, 100]
   int max_history_frames = 10;      // flow history for carrying late detections forward [1, 100]
+  // A box that moved within dynamic_hold_frames and that the newest detection misses is carried by the
+  // flow of its points for up to this many frames after its last detection: one missed detection no
+  // longer uncovers a walking person for a whole detector interval (docs/dynamic.md) [0, 100]; 0 = off.
+  int coast_frames = 0;
 
   static MotionCheckConfig from_yaml(const ConfigReader& r);
 };
@@ -133,11 +137,14 @@ class DynamicFeatureFilter {
     cv::Rect2f box;
     int class_id = 0;
     std::size_t last_seen_frame = 0;
+    std::size_t last_detected_frame = 0;            // last frame a detection (not coasting) placed it
     std::optional<std::size_t> last_dynamic_frame;  // last frame the motion check saw it move
     int static_streak = 0;                          // consecutive frames the motion check saw it still
   };
 
   std::vector<Detection> carry_boxes(const Detections& d, std::size_t to_frame) const;
+  // Boxes of recently moving tracks that no carried detection overlaps, moved by this frame's flow.
+  std::vector<Detection> coast_boxes(const std::vector<Detection>& detected, std::size_t frame) const;
   // Fill res.flow_residual and eps (per-point threshold) from the points `fit` (static candidates).
   // Reprojection: camera motion by PnP-RANSAC on depth; false when it cannot be estimated.
   bool reprojection_residuals(const DynamicInput& in, const std::vector<int>& fit, DynamicResult& res,
