@@ -298,6 +298,22 @@ TEST(MotionCheck, CarriedBoxFollowsAnApproachingObjectsScale) {
   EXPECT_NEAR(r.boxes[0].box.width / truth.width, 1.0, 0.08);
 }
 
+// Frame i of a rendered sequence (previous image i - 1), with its depth and K when `depth`.
+DynamicInput sequence_input(const std::vector<Rendered>& frames, std::size_t i,
+                            const std::vector<cv::KeyPoint>* kps, const Detections* det, bool depth) {
+  DynamicInput in;
+  in.frame_index = i;
+  in.prev_gray = &frames[i - 1].gray;
+  in.gray = &frames[i].gray;
+  in.keypoints = kps;
+  in.detections = det;
+  if (depth) {
+    in.depth = &frames[i].depth;
+    in.K = test::test_K();
+  }
+  return in;
+}
+
 TEST(MotionCheck, PausingPersonIsHeldDynamicThenReleased) {
   const Scene s;
   const cv::Point2d at[] = {{0, 0}, {0.05, 0}, {0.05, 0}, {0.05, 0}};  // moves once, then stands
@@ -314,13 +330,7 @@ TEST(MotionCheck, PausingPersonIsHeldDynamicThenReleased) {
       Detections det;
       det.frame_index = i;
       det.items = {{test::label_box(frames[i].label, 2), 0, 0.9f}};
-      DynamicInput in;
-      in.frame_index = i;
-      in.prev_gray = &frames[i - 1].gray;
-      in.gray = &frames[i].gray;
-      in.keypoints = &kps;
-      in.detections = &det;
-      dyn.push_back(f.process(in).box_dynamic.at(0));
+      dyn.push_back(f.process(sequence_input(frames, i, &kps, &det, false)).box_dynamic.at(0));
     }
     EXPECT_TRUE(dyn[0]);
     EXPECT_EQ(dyn[2], hold == 10) << "hold " << hold;  // frame 3: two frames after the last motion
@@ -347,15 +357,7 @@ TEST(MotionCheck, MissedDetectionOfAMovingPersonIsCoasted) {
       det.frame_index = i;
       const cv::Rect2f truth = test::label_box(frames[i].label, 2);
       if (i <= 2) det.items = {{truth, 0, 0.9f}};
-      DynamicInput in;
-      in.frame_index = i;
-      in.prev_gray = &frames[i - 1].gray;
-      in.gray = &frames[i].gray;
-      in.depth = &frames[i].depth;
-      in.K = test::test_K();
-      in.keypoints = &kps;
-      in.detections = &det;
-      const DynamicResult r = f.process(in);
+      const DynamicResult r = f.process(sequence_input(frames, i, &kps, &det, true));
       const bool coasting = i > 2 && static_cast<int>(i - 2) <= coast;
       if (i <= 2 || coasting) {
         ASSERT_EQ(r.boxes.size(), 1u) << "frame " << i;

@@ -131,6 +131,14 @@ TEST(EffectiveGrid, CountsOnlyPointsBeyondThe30DegreeRule) {
   EXPECT_EQ(g(1, 1), 0);
 }
 
+// How often `rule` fired in the policy's counts; -1 when the policy has no such rule.
+long rule_count(const KeyframePolicy& policy, const std::string& rule) {
+  for (const auto& [name, n] : policy.rule_counts()) {
+    if (name == rule) return static_cast<long>(n);
+  }
+  return -1L;
+}
+
 KeyframeCandidate healthy_candidate() {
   KeyframeCandidate c;
   c.frames_since_keyframe = 5;
@@ -172,13 +180,7 @@ TEST(AdaptivePolicy, NeedsManySpreadEffectivePoints) {
   EXPECT_FALSE(policy->decide(c));
   // Rule counts: 3 decisions; the corner frame met the threshold but was not spread; one inserted by
   // the paper's rule; no safety net fired.
-  const auto counts = policy->rule_counts();
-  const auto count = [&](const std::string& rule) {
-    for (const auto& [name, n] : counts) {
-      if (name == rule) return static_cast<long>(n);
-    }
-    return -1L;
-  };
+  const auto count = [&](const std::string& rule) { return rule_count(*policy, rule); };
   EXPECT_EQ(count("decisions"), 3);
   EXPECT_EQ(count("any_effective"), 3);
   EXPECT_EQ(count("threshold_met"), 2);
@@ -244,34 +246,29 @@ TEST(KeyframePolicies, HoldWhileAtTheReferenceKeyframesPlace) {
     cfg.hold_max_translation_m = 0.02;
     cfg.hold_max_rotation_deg = 1.0;
     auto policy = make_keyframe_policy(cfg);
-    KeyframeCandidate c = healthy_candidate();
-    c.tracked_inliers = 200;  // < 0.75 * 350 with mapping idle: both policies insert
-    ASSERT_TRUE(policy->decide(c)) << "place unknown: never held";
-    c.reference_translation_m = 0.019;
-    c.reference_rotation_deg = 0.9;
-    EXPECT_FALSE(policy->decide(c)) << "at the reference's place";
-    c.close_tracked = 50;
-    c.close_untracked = 200;
-    EXPECT_FALSE(policy->decide(c)) << "held even when close points run out";
-    c = healthy_candidate();
-    c.tracked_inliers = 200;
-    c.reference_translation_m = 0.021;
-    c.reference_rotation_deg = 0.0;
-    EXPECT_TRUE(policy->decide(c)) << "2.1 cm away";
-    c.reference_translation_m = 0.0;
-    c.reference_rotation_deg = 1.1;
-    EXPECT_TRUE(policy->decide(c)) << "turned 1.1 deg";
-    c.reference_rotation_deg = 0.0;
-    c.tracked_inliers = 99;
-    EXPECT_TRUE(policy->decide(c)) << "tracking fewer than hold_min_tracked";
-    long held = -1;
-    for (const auto& [rule, n] : policy->rule_counts())
-      if (rule == "vetoed_at_reference") held = static_cast<long>(n);
-    EXPECT_EQ(held, 2);
+    // 200 inliers < 0.75 * 350 with mapping idle: both policies insert unless held.
+    const auto at = [](double translation_m, double rotation_deg, int inliers = 200) {
+      KeyframeCandidate c = healthy_candidate();
+      c.tracked_inliers = inliers;
+      c.reference_translation_m = translation_m;
+      c.reference_rotation_deg = rotation_deg;
+      return c;
+    };
+    KeyframeCandidate unknown = healthy_candidate();
+    unknown.tracked_inliers = 200;
+    ASSERT_TRUE(policy->decide(unknown)) << "place unknown: never held";
+    EXPECT_FALSE(policy->decide(at(0.019, 0.9))) << "at the reference's place";
+    KeyframeCandidate close_running_out = at(0.019, 0.9);
+    close_running_out.close_tracked = 50;
+    close_running_out.close_untracked = 200;
+    EXPECT_FALSE(policy->decide(close_running_out)) << "held even when close points run out";
+    EXPECT_TRUE(policy->decide(at(0.021, 0.0))) << "2.1 cm away";
+    EXPECT_TRUE(policy->decide(at(0.0, 1.1))) << "turned 1.1 deg";
+    EXPECT_TRUE(policy->decide(at(0.0, 0.0, 99))) << "tracking fewer than hold_min_tracked";
+    EXPECT_EQ(rule_count(*policy, "vetoed_at_reference"), 2);
     KeyframePolicyConfig off = cfg;
     off.hold_min_tracked = 0;
-    c.tracked_inliers = 200;
-    EXPECT_TRUE(make_keyframe_policy(off)->decide(c)) << "hold_min_tracked 0: never held";
+    EXPECT_TRUE(make_keyframe_policy(off)->decide(at(0.0, 0.0))) << "hold_min_tracked 0: never held";
   }
 }
 

@@ -302,7 +302,8 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
   if (use_boxes && in.detections != nullptr) res.boxes = carry_boxes(*in.detections, in.frame_index);
   const std::size_t n_detected = res.boxes.size();  // the boxes after these are coasted, not detected
   if (use_boxes && do_flow) {
-    for (Detection& det : coast_boxes(res.boxes, in.frame_index)) res.boxes.push_back(det);
+    const std::vector<Detection> coasted = coast_boxes(res.boxes, in.frame_index);
+    res.boxes.insert(res.boxes.end(), coasted.begin(), coasted.end());
   }
   const auto margin = static_cast<float>(cfg_.box_margin_px);
   const std::size_t n = cur.size();

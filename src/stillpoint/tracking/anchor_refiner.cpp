@@ -58,9 +58,8 @@ bool AnchorRefiner::aligned_only(const LocalMapSnapshot& map, const geo::SE3& T_
   for (const Anchor& a : anchors_) {
     const LocalMapSnapshot::Pose* kf = map.pose(a.id);
     if (kf == nullptr || kf->bad) continue;
-    const PoseDeviation d = pose_deviation(T_cw, kf->T_cw);
-    if (d.translation_m <= config_.aligned_only_max_translation_m &&
-        d.rotation_deg <= config_.aligned_only_max_rotation_deg)
+    if (pose_deviation(T_cw, kf->T_cw)
+            .within(config_.aligned_only_max_translation_m, config_.aligned_only_max_rotation_deg))
       return true;
   }
   return false;

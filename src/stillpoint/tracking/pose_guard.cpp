@@ -22,8 +22,7 @@ PoseDeviation pose_deviation(const geo::SE3& a_cw, const geo::SE3& b_cw) {
 }
 
 bool PoseGuardRules::is_jump(const PoseDeviation& d) const {
-  return config_.enabled &&
-         (d.translation_m > config_.max_translation_m || d.rotation_deg > config_.max_rotation_deg);
+  return config_.enabled && !d.within(config_.max_translation_m, config_.max_rotation_deg);
 }
 
 bool PoseGuardRules::blames_suspects(int inliers, int suspect_inliers) const {

@@ -32,6 +32,9 @@ struct PoseGuardStats {
 struct PoseDeviation {
   double translation_m = 0;  // distance between the camera centres
   double rotation_deg = 0;   // angle of the relative rotation
+  [[nodiscard]] bool within(double max_translation_m, double max_rotation_deg) const {
+    return translation_m <= max_translation_m && rotation_deg <= max_rotation_deg;
+  }
 };
 
 PoseDeviation pose_deviation(const geo::SE3& a_cw, const geo::SE3& b_cw);

@@ -545,7 +545,8 @@ bool Tracker::need_keyframe(const map::MapReader& view, const Frame& frame,
   c.mapping_queue = mapping.queue;
   c.image_width = camera_.width;
   c.image_height = camera_.height;
-  if (const map::Keyframe* ref = view.keyframe(reference_); ref != nullptr) {
+  const map::Keyframe* ref = view.keyframe(reference_);
+  if (ref != nullptr) {
     const PoseDeviation d = pose_deviation(frame.T_cw, ref->T_cw);
     c.reference_translation_m = d.translation_m;
     c.reference_rotation_deg = d.rotation_deg;
@@ -559,17 +560,16 @@ bool Tracker::need_keyframe(const map::MapReader& view, const Frame& frame,
       ++c.close_untracked;
     }
   }
-  if (policy_->needs_view_changes()) {
-    const map::Keyframe* ref = view.keyframe(reference_);
+  if (policy_->needs_view_changes() && ref != nullptr) {
     const Eigen::Vector3d c_now = frame.camera_center();
     const Eigen::Vector3d c_ref = ref->camera_center();
+    const bool from_point_normal = config_.keyframes.effective_reference == "point";
     for (std::size_t i = 0; i < frame.points.size(); ++i) {
       if (frame.points[i] == map::kNoPoint || frame.outlier[i]) continue;
       const map::MapPoint* p = view.live_point(frame.points[i]);
       if (p == nullptr) continue;
-      const double angle = config_.keyframes.effective_reference == "point"
-                               ? angle_from_normal_deg(p->position, p->normal, c_now)
-                               : viewing_angle_change_deg(p->position, c_ref, c_now);
+      const double angle = from_point_normal ? angle_from_normal_deg(p->position, p->normal, c_now)
+                                             : viewing_angle_change_deg(p->position, c_ref, c_now);
       c.view_changes.push_back(
           {frame.features.keypoints[i].pt.x, frame.features.keypoints[i].pt.y, static_cast<float>(angle)});
     }
