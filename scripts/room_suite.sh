@@ -18,8 +18,10 @@ motions="walking_static walking_xyz walking_rpy walking_halfsphere sitting_stati
 # rooms 105-108 were added in session 15 (2026-12-03) to look for the held-back rooms' failures on rooms
 # we may tune on; the held-back rooms were not touched. Held-back rooms 205-208 were added in session 24
 # (2026-12-05): 201-204 had been reported on for twenty sessions (docs/results.md, "Session 24").
+# Rooms 209-216 were added in session 26 (2026-12-05) as fresh judges for a setting first looked at on
+# 205-208 (docs/results.md, "Session 26").
 tune_seeds="101 102 103 104 105 106 107 108"
-heldout_seeds="201 202 203 204 205 206 207 208"
+heldout_seeds="201 202 203 204 205 206 207 208 209 210 211 212 213 214 215 216"
 while (($#)); do
   case "$1" in
     --set) set_name="$2"; shift 2 ;;

@@ -241,6 +241,42 @@ TEST(MotionCheck, AblationModes) {
   EXPECT_EQ(DynamicFeatureFilter(cfg).process(input(p, true, &det)).culled, 0);
 }
 
+// An unboxed mover culls the keypoints nearest to its points, but not the background beside it: a wall
+// keypoint 1 m behind the moving patch is not the patch, even when a patch point is its nearest flow point.
+TEST(MotionCheck, UnboxedMoverCullsNoDepthSeparatedBackground) {
+  const Scene s;
+  const Pair p = make_pair(s, 1.5, {0.04, 0, 0}, {0, 0.05});
+  const auto label_at = [&](const cv::Point2f& q) {
+    return p.cur.label.at<uchar>(cvRound(q.y), cvRound(q.x));
+  };
+  // Share culled of the wall keypoints whose nearest flow point (within the radius) lies on the patch.
+  const auto wall_next_to_patch_culled = [&](const DynamicResult& r, double radius) {
+    int n = 0, culled = 0;
+    for (std::size_t k = 0; k < p.kps.size(); ++k) {
+      if (label_at(p.kps[k].pt) != 0) continue;
+      double best = radius * radius;
+      int nearest = -1;
+      for (std::size_t j = 0; j < r.flow_points.size(); ++j) {
+        const cv::Point2f d = r.flow_points[j] - p.kps[k].pt;
+        if (d.dot(d) < best) best = d.dot(d), nearest = static_cast<int>(j);
+      }
+      if (nearest < 0 || label_at(r.flow_points[static_cast<std::size_t>(nearest)]) != 2) continue;
+      ++n, culled += r.keypoint_dynamic[k] ? 1 : 0;
+    }
+    EXPECT_GE(n, 10);
+    return n > 0 ? static_cast<double>(culled) / n : 1.0;
+  };
+  MotionCheckConfig cfg;
+  cfg.mode = CullMode::kFlowOnly;  // no boxes: the patch is an unboxed mover
+  cfg.unboxed_depth_separated = false;
+  const DynamicResult nearest_only = DynamicFeatureFilter(cfg).process(input(p, true));
+  EXPECT_GE(wall_next_to_patch_culled(nearest_only, cfg.unboxed_radius_px), 0.5);  // the wall went too
+  cfg.unboxed_depth_separated = true;
+  const DynamicResult separated = DynamicFeatureFilter(cfg).process(input(p, true));
+  EXPECT_LE(wall_next_to_patch_culled(separated, cfg.unboxed_radius_px), 0.05);
+  EXPECT_GE(keypoint_shares(p, separated, {}).dyn_patch, 0.7);  // the patch itself is still culled
+}
+
 // Feeds frames 1.. to a default filter, each with the same (stale) detections; the last result.
 DynamicResult run_frames(const std::vector<Rendered>& frames, const std::vector<cv::KeyPoint>& kps,
                          const Detections& det) {

@@ -491,6 +491,11 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
         const int j = nearest_flow(p);
         const bool mover_near = j >= 0 && moving[static_cast<std::size_t>(j)];
         dyn = cull_movers && j >= 0 && confirmed[static_cast<std::size_t>(j)];
+        if (dyn && cfg_.unboxed_depth_separated && has_depth) {
+          const float z = raw_depth(in.depth, p);
+          const float z_mover = stable_depth(*in.depth, cur[static_cast<std::size_t>(j)]);
+          if (z > 0.f && z_mover > 0.f && std::abs(z - z_mover) > bg_margin) dyn = false;
+        }
         near_object = near_object || mover_near;
       }
       res.keypoint_dynamic[k] = dyn;

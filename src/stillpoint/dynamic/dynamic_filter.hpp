@@ -65,6 +65,10 @@ struct MotionCheckConfig {
   bool keep_background_in_box = true;
   double background_depth_margin_m = 0.4;  // metres [0.05, 10]
   bool cull_unboxed_movers = true;         // moving point clusters outside boxes are culled too
+  // A keypoint is not culled for a nearby mover whose depth differs from its own by more than
+  // background_depth_margin_m: background seen beside a close person is not the person. Off: measured
+  // only together with a 1 px reprojection threshold, which did not generalise (docs/dynamic.md).
+  bool unboxed_depth_separated = false;
   // Most of the scene outside the boxes is static: when more than this share of the points the camera
   // motion was fitted on comes out moving, the fit is wrong (RANSAC failed and a poor prediction was
   // kept), and flow decides nothing in this frame: boxes fall back to their class, no unboxed point
