@@ -277,6 +277,14 @@ TEST(MotionCheck, UnboxedMoverCullsNoDepthSeparatedBackground) {
   EXPECT_GE(keypoint_shares(p, separated, {}).dyn_patch, 0.7);  // the patch itself is still culled
 }
 
+// n frames of a still camera, the patch (a walking person) moved sideways by step_m per frame.
+std::vector<Rendered> walking_patch_frames(const Scene& s, int n, double step_m) {
+  std::vector<Rendered> frames;
+  for (int i = 0; i < n; ++i)
+    frames.push_back(test::render(s.planes({step_m * i, 0}), Eigen::Isometry3d::Identity()));
+  return frames;
+}
+
 // Feeds frames 1.. to a default filter, each with the same (stale) detections; the last result.
 DynamicResult run_frames(const std::vector<Rendered>& frames, const std::vector<cv::KeyPoint>& kps,
                          const Detections& det) {
@@ -296,9 +304,7 @@ DynamicResult run_frames(const std::vector<Rendered>& frames, const std::vector<
 
 TEST(MotionCheck, LateDetectionIsCarriedToTheCurrentFrame) {
   const Scene s;
-  std::vector<Rendered> frames;
-  for (int i = 0; i < 3; ++i)
-    frames.push_back(test::render(s.planes({0.06 * i, 0}), Eigen::Isometry3d::Identity()));
+  const std::vector<Rendered> frames = walking_patch_frames(s, 3, 0.06);
   const auto kps = test::grid_keypoints(640, 480, 8);
   Detections det;  // detected on frame 0, used on frames 1 and 2
   det.frame_index = 0;
@@ -379,9 +385,7 @@ TEST(MotionCheck, PausingPersonIsHeldDynamicThenReleased) {
 // is unboxed from the first miss.
 TEST(MotionCheck, MissedDetectionOfAMovingPersonIsCoasted) {
   const Scene s;
-  std::vector<Rendered> frames;
-  for (int i = 0; i < 7; ++i)
-    frames.push_back(test::render(s.planes({0.02 * i, 0}), Eigen::Isometry3d::Identity()));
+  const std::vector<Rendered> frames = walking_patch_frames(s, 7, 0.02);
   const auto kps = test::grid_keypoints(640, 480, 8);
   for (int coast : {0, 3}) {
     SCOPED_TRACE(coast);
