@@ -496,7 +496,9 @@ TEST(MotionCheck, ProvenStillPeopleAreCulledUnlessTheRestIsTooPoor) {
       if (!person.contains((*kps)[k].pt)) continue;
       ++person_total;
       person_kept += r.keypoint_dynamic[k] ? 0 : 1;
-      if (!r.keypoint_dynamic[k]) EXPECT_TRUE(r.keypoint_suspect[k]);
+      if (!r.keypoint_dynamic[k]) {
+        EXPECT_TRUE(r.keypoint_suspect[k]);
+      }
     }
     ASSERT_GT(person_total, 100);
     const bool rich = kps == &all;

@@ -43,6 +43,9 @@ MotionCheckConfig MotionCheckConfig::from_yaml(const ConfigReader& r) {
   r.read("epsilon_reprojection_px", c.epsilon_reprojection_px, 0.1, 50.0);
   r.read("ransac_threshold_px", c.ransac_threshold_px, 0.1, 20.0);
   r.read("ransac_confidence", c.ransac_confidence, 0.5, 0.9999);
+  r.read_choice("ego_fit", c.ego_fit, {"ransac", "msac"});
+  r.read("ego_fit_flat_points", c.ego_fit_flat_points);
+  r.read("ego_fit_threshold_px", c.ego_fit_threshold_px, 0.0, 50.0);
   r.read("ransac_iterations", c.ransac_iterations, 10, 10000);
   r.read("min_static_points", c.min_static_points, 8, 1000);
   r.read("moving_ratio_threshold", c.moving_ratio_threshold, 0.0, 1.0);

@@ -43,8 +43,22 @@ struct MotionCheckConfig {
   double ransac_threshold_px =
       1.0;                          // F / homography RANSAC inlier threshold (PnP uses the epsilon) [0.1, 20]
   double ransac_confidence = 0.99;  // [0.5, 0.9999]
-  int ransac_iterations = 200;      // PnP RANSAC iterations [10, 10000]
-  int min_static_points = 15;  // fewer points outside boxes: ego-motion is fitted on all points [8, 1000]
+  // Camera-motion fit of the reprojection residual. "ransac": OpenCV's PnP-RANSAC (inlier count, then a
+  // least-squares refinement on all inliers). "msac": hypotheses scored by the truncated squared
+  // residual, refined on ever tighter inliers: a close person walking slowly fits a slightly wrong
+  // camera motion within the threshold as well as the background does, which counting inliers cannot
+  // tell apart but the residuals' size can (docs/dynamic.md, step 3).
+  std::string ego_fit = "ransac";  // ransac | msac
+  // msac: the fitted points without depth (far walls beyond the sensor's range) also score each
+  // hypothesis, by their epipolar distance. Off: the epipolar distance cannot see a rotation that
+  // compensates a translation error, the case that matters (room207_walking_xyz 0.23 cm either way),
+  // and it costs time.
+  bool ego_fit_flat_points = false;
+  // msac: residual at which a hypothesis' squared cost is truncated, px; 0 = epsilon_reprojection_px
+  // (flat points: epsilon_epipolar_px) [0, 50].
+  double ego_fit_threshold_px = 0.0;
+  int ransac_iterations = 200;  // PnP RANSAC iterations [10, 10000]
+  int min_static_points = 15;   // fewer points outside boxes: ego-motion is fitted on all points [8, 1000]
   double moving_ratio_threshold = 0.3;  // share of moving points that makes a box dynamic [0, 1]
   int min_points_to_decide = 5;         // fewer tracked points in a box: undecided [1, 1000]
   std::vector<std::string> always_dynamic_classes = {"person"};  // undecided boxes of these are dynamic

@@ -3,6 +3,7 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 #include <opencv2/calib3d.hpp>
@@ -10,27 +11,179 @@
 
 #include "stillpoint/dynamic/depth_lookup.hpp"
 #include "stillpoint/dynamic/dynamic_filter.hpp"
+#include "stillpoint/dynamic/ego_motion_fit.hpp"
 
 namespace sp::dyn {
 
 namespace {
 
-// Distance of `x` to the epipolar line F * y (pixels); F maps points y to lines in x's image.
-float line_distance(const cv::Matx33d& F, const cv::Point2f& y, const cv::Point2f& x) {
+cv::Matx33d skew(const cv::Vec3d& t) { return {0, -t[2], t[1], t[2], 0, -t[0], -t[1], t[0], 0}; }
+
+// Squared reprojection residuals of the points with depth under (R, t).
+void squared_residuals(const MotionFitPoints& pts, const cv::Matx33d& K, const cv::Matx33d& R,
+                       const cv::Vec3d& t, std::vector<double>& r2) {
+  r2.resize(pts.cur_3d.size());
+  for (std::size_t i = 0; i < pts.cur_3d.size(); ++i) {
+    const cv::Point3f& X = pts.cur_3d[i];
+    const cv::Vec3d q = R * cv::Vec3d(X.x, X.y, X.z) + t;
+    if (q[2] <= 1e-6) {
+      r2[i] = std::numeric_limits<double>::max();
+      continue;
+    }
+    const double du = K(0, 0) * q[0] / q[2] + K(0, 2) - pts.prev_px[i].x;
+    const double dv = K(1, 1) * q[1] / q[2] + K(1, 2) - pts.prev_px[i].y;
+    r2[i] = du * du + dv * dv;
+  }
+}
+
+double truncated_sum(const std::vector<double>& r2, double thr2) {
+  double c = 0.0;
+  for (double v : r2) c += std::min(v, thr2);
+  return c;
+}
+
+// Truncated squared epipolar distance of the points without depth (rotation homography transfer when
+// the camera barely translates).
+double flat_cost(const MotionFitPoints& pts, const cv::Matx33d& K, const cv::Matx33d& R, const cv::Vec3d& t,
+                 double thr) {
+  if (pts.flat_cur_px.empty()) return 0.0;
+  const cv::Matx33d Ki = K.inv();
+  const bool translating = cv::norm(t) > 1e-3;
+  const cv::Matx33d M = translating ? Ki.t() * skew(t) * R * Ki : K * R * Ki;
+  const double thr2 = thr * thr;
+  double c = 0.0;
+  for (std::size_t i = 0; i < pts.flat_cur_px.size(); ++i) {
+    const cv::Point2f &y = pts.flat_cur_px[i], &x = pts.flat_prev_px[i];
+    const double d = translating ? epipolar_line_distance(M, y, x) : homography_transfer_error(M, y, x);
+    c += d < 0.0 ? thr2 : std::min(d * d, thr2);
+  }
+  return c;
+}
+
+cv::Matx33d rotation_of(const cv::Mat& rvec) {
+  cv::Mat Rm;
+  cv::Rodrigues(rvec, Rm);
+  return cv::Matx33d(Rm);
+}
+
+cv::Vec3d vec_of(const cv::Mat& tvec) { return {tvec.at<double>(0), tvec.at<double>(1), tvec.at<double>(2)}; }
+
+// A motion hypothesis from three points with depth: Gauss-Newton on their six reprojection equations,
+// from the prediction (frame-to-frame motion is small, so a few steps converge; cheaper than a closed-
+// form P3P by an order of magnitude). nullopt when the system is degenerate or does not converge.
+std::optional<std::pair<cv::Matx33d, cv::Vec3d>> three_point_motion(const MotionFitPoints& pts,
+                                                                    const cv::Matx33d& K,
+                                                                    const std::array<int, 3>& idx,
+                                                                    const cv::Matx33d& R0,
+                                                                    const cv::Vec3d& t0) {
+  cv::Matx33d R = R0;
+  cv::Vec3d t = t0;
+  for (int iter = 0; iter < 4; ++iter) {
+    cv::Matx66d H = cv::Matx66d::zeros();
+    cv::Vec6d g = cv::Vec6d::all(0.0);
+    double err2 = 0.0;
+    for (int k : idx) {
+      const cv::Point3f& X = pts.cur_3d[static_cast<std::size_t>(k)];
+      const cv::Vec3d p = R * cv::Vec3d(X.x, X.y, X.z);
+      const cv::Vec3d q = p + t;
+      if (q[2] <= 1e-6) return std::nullopt;
+      const double iz = 1.0 / q[2];
+      const cv::Point2f& o = pts.prev_px[static_cast<std::size_t>(k)];
+      const double ru = K(0, 0) * q[0] * iz + K(0, 2) - o.x, rv = K(1, 1) * q[1] * iz + K(1, 2) - o.y;
+      err2 += ru * ru + rv * rv;
+      // d(u, v)/dq, and dq/d(dw, dt) = [-[p]x | I] for q = exp(dw) p + t + dt.
+      const cv::Matx23d Jp(K(0, 0) * iz, 0, -K(0, 0) * q[0] * iz * iz, 0, K(1, 1) * iz,
+                           -K(1, 1) * q[1] * iz * iz);
+      const cv::Matx33d minus_px(0, p[2], -p[1], -p[2], 0, p[0], p[1], -p[0], 0);
+      const cv::Matx23d Jw = Jp * minus_px;
+      cv::Matx<double, 2, 6> J;
+      for (int r = 0; r < 2; ++r) {
+        for (int c = 0; c < 3; ++c) J(r, c) = Jw(r, c), J(r, c + 3) = Jp(r, c);
+      }
+      H += J.t() * J;
+      g += J.t() * cv::Vec2d(ru, rv);
+    }
+    if (iter > 0 && err2 < 1e-8) break;
+    cv::Vec6d d;
+    if (!cv::solve(H, -g, d, cv::DECOMP_LU)) return std::nullopt;  // degenerate sample
+    cv::Mat dR;
+    cv::Rodrigues(cv::Vec3d(d[0], d[1], d[2]), dR);
+    R = cv::Matx33d(dR) * R;
+    t = cv::Matx33d(dR) * t + cv::Vec3d(d[3], d[4], d[5]);
+  }
+  if (!cv::checkRange(cv::Mat(R)) || !cv::checkRange(cv::Mat(t))) return std::nullopt;
+  return std::make_pair(R, t);
+}
+
+}  // namespace
+
+float epipolar_line_distance(const cv::Matx33d& F, const cv::Point2f& y, const cv::Point2f& x) {
   const cv::Vec3d l = F * cv::Vec3d(y.x, y.y, 1.0);
   const double n = std::hypot(l[0], l[1]);
   return n > 1e-12 ? static_cast<float>(std::abs(l[0] * x.x + l[1] * x.y + l[2]) / n) : -1.f;
 }
 
-float transfer_error(const cv::Matx33d& H, const cv::Point2f& y, const cv::Point2f& x) {
+float homography_transfer_error(const cv::Matx33d& H, const cv::Point2f& y, const cv::Point2f& x) {
   const cv::Vec3d q = H * cv::Vec3d(y.x, y.y, 1.0);
   if (std::abs(q[2]) < 1e-12) return -1.f;
   return static_cast<float>(std::hypot(q[0] / q[2] - x.x, q[1] / q[2] - x.y));
 }
 
-cv::Matx33d skew(const cv::Vec3d& t) { return {0, -t[2], t[1], t[2], 0, -t[0], -t[1], t[0], 0}; }
-
-}  // namespace
+std::optional<CameraMotion> fit_camera_motion_msac(const MotionFitPoints& pts, const cv::Matx33d& K,
+                                                   const std::optional<CameraMotion>& guess,
+                                                   const MsacOptions& opt) {
+  const int n = static_cast<int>(pts.cur_3d.size());
+  if (n < 4 || pts.prev_px.size() != pts.cur_3d.size() || pts.flat_cur_px.size() != pts.flat_prev_px.size())
+    return std::nullopt;
+  const double thr2 = opt.threshold_px * opt.threshold_px;
+  const cv::Mat Kcv(K);
+  std::vector<double> r2;
+  double best = std::numeric_limits<double>::max();
+  std::optional<std::pair<cv::Matx33d, cv::Vec3d>> best_motion;
+  const auto consider = [&](const cv::Matx33d& R, const cv::Vec3d& t) {
+    squared_residuals(pts, K, R, t, r2);
+    double c = truncated_sum(r2, thr2);
+    if (c >= best) return;  // the flat points can only add
+    c += flat_cost(pts, K, R, t, opt.flat_threshold_px);
+    if (c < best) best = c, best_motion.emplace(R, t);
+  };
+  const cv::Matx33d R0 = guess ? guess->R : cv::Matx33d::eye();
+  const cv::Vec3d t0 = guess ? guess->t : cv::Vec3d(0, 0, 0);
+  if (guess) consider(R0, t0);
+  cv::RNG rng(0x5eed);
+  for (int it = 0; it < opt.iterations; ++it) {
+    std::array<int, 3> idx{};
+    for (std::size_t k = 0; k < idx.size(); ++k) {
+      const auto taken = idx.begin() + static_cast<std::ptrdiff_t>(k);
+      do {
+        idx[k] = rng.uniform(0, n);
+      } while (std::find(idx.begin(), taken, idx[k]) != taken);
+    }
+    if (const auto h = three_point_motion(pts, K, idx, R0, t0)) consider(h->first, h->second);
+  }
+  if (!best_motion) return std::nullopt;
+  cv::Mat rvec, tvec(best_motion->second, true);
+  cv::Rodrigues(cv::Mat(best_motion->first), rvec);
+  // Least squares on the best hypothesis' inliers, then again on the refined motion's inliers within
+  // max(1 px, half the threshold): with a loose threshold, points just inside it (a slow mover) stop
+  // pulling the motion.
+  for (const double gate : {opt.threshold_px, std::max(1.0, 0.5 * opt.threshold_px)}) {
+    squared_residuals(pts, K, rotation_of(rvec), vec_of(tvec), r2);
+    std::vector<cv::Point3f> o;
+    std::vector<cv::Point2f> p;
+    for (std::size_t i = 0; i < r2.size(); ++i) {
+      if (r2[i] <= gate * gate) o.push_back(pts.cur_3d[i]), p.push_back(pts.prev_px[i]);
+    }
+    if (o.size() < 6) break;
+    cv::solvePnPRefineLM(o, p, Kcv, cv::noArray(), rvec, tvec);
+  }
+  CameraMotion m;
+  m.R = rotation_of(rvec);
+  m.t = vec_of(tvec);
+  squared_residuals(pts, K, m.R, m.t, r2);
+  m.inliers = static_cast<int>(std::count_if(r2.begin(), r2.end(), [&](double v) { return v <= thr2; }));
+  return m;
+}
 
 bool DynamicFeatureFilter::reprojection_residuals(const DynamicInput& in, const std::vector<int>& fit,
                                                   DynamicResult& res, std::vector<float>& eps) const {
@@ -48,12 +201,18 @@ bool DynamicFeatureFilter::reprojection_residuals(const DynamicInput& in, const 
     X[i] = cv::Point3f(static_cast<float>((cur[i].x - cx) * z / fx),
                        static_cast<float>((cur[i].y - cy) * z / fy), z);
   }
-  std::vector<cv::Point3f> obj;
-  std::vector<cv::Point2f> img;
+  MotionFitPoints pts;
+  std::vector<cv::Point3f>& obj = pts.cur_3d;
+  std::vector<cv::Point2f>& img = pts.prev_px;
   for (int i : fit) {
-    if (!has_z[static_cast<std::size_t>(i)]) continue;
-    obj.push_back(X[static_cast<std::size_t>(i)]);
-    img.push_back(prev[static_cast<std::size_t>(i)]);
+    const auto k = static_cast<std::size_t>(i);
+    if (has_z[k]) {
+      obj.push_back(X[k]);
+      img.push_back(prev[k]);
+    } else if (cfg_.ego_fit_flat_points) {  // scored by MSAC only
+      pts.flat_cur_px.push_back(cur[k]);
+      pts.flat_prev_px.push_back(prev[k]);
+    }
   }
   cv::Mat Kcv;
   cv::eigen2cv(K, Kcv);
@@ -71,12 +230,33 @@ bool DynamicFeatureFilter::reprojection_residuals(const DynamicInput& in, const 
   }
   bool ok = false;
   if (obj.size() >= 8) {
-    std::vector<int> inliers;
-    ok = cv::solvePnPRansac(obj, img, Kcv, cv::noArray(), rvec, tvec, guess, cfg_.ransac_iterations,
-                            static_cast<float>(cfg_.epsilon_reprojection_px), cfg_.ransac_confidence, inliers,
-                            cv::SOLVEPNP_ITERATIVE);
-    ok = ok && static_cast<double>(inliers.size()) >= std::max(6.0, 0.3 * static_cast<double>(obj.size()));
-    res.ego_inliers = ok ? static_cast<int>(inliers.size()) : 0;
+    int n_inliers = 0;
+    if (cfg_.ego_fit == "msac") {
+      MsacOptions opt;
+      opt.threshold_px =
+          cfg_.ego_fit_threshold_px > 0.0 ? cfg_.ego_fit_threshold_px : cfg_.epsilon_reprojection_px;
+      opt.flat_threshold_px = cfg_.ego_fit_threshold_px > 0.0
+                                  ? std::min(cfg_.ego_fit_threshold_px, cfg_.epsilon_epipolar_px)
+                                  : cfg_.epsilon_epipolar_px;
+      opt.iterations = cfg_.ransac_iterations;
+      std::optional<CameraMotion> g;
+      if (guess) g = CameraMotion{rotation_of(rvec), vec_of(tvec), 0};
+      const std::optional<CameraMotion> m = fit_camera_motion_msac(pts, cv::Matx33d(Kcv), g, opt);
+      ok = m.has_value();
+      if (ok) {
+        cv::Rodrigues(cv::Mat(m->R), rvec);
+        tvec = cv::Mat(m->t, true);
+        n_inliers = m->inliers;
+      }
+    } else {
+      std::vector<int> inliers;
+      ok = cv::solvePnPRansac(obj, img, Kcv, cv::noArray(), rvec, tvec, guess, cfg_.ransac_iterations,
+                              static_cast<float>(cfg_.epsilon_reprojection_px), cfg_.ransac_confidence,
+                              inliers, cv::SOLVEPNP_ITERATIVE);
+      n_inliers = static_cast<int>(inliers.size());
+    }
+    ok = ok && static_cast<double>(n_inliers) >= std::max(6.0, 0.3 * static_cast<double>(obj.size()));
+    res.ego_inliers = ok ? n_inliers : 0;
     if (!ok && guess) {  // keep the prediction, not what a failed RANSAC left behind
       const Eigen::Isometry3d T = in.T_cur_prev_predicted->inverse();
       cv::Mat Rcv;
@@ -105,8 +285,8 @@ bool DynamicFeatureFilter::reprojection_residuals(const DynamicInput& in, const 
       res.flow_residual[i] = static_cast<float>(std::hypot(u - prev[i].x, v - prev[i].y));
       eps[i] = static_cast<float>(cfg_.epsilon_reprojection_px);
     } else {
-      res.flow_residual[i] =
-          translating ? line_distance(F, cur[i], prev[i]) : transfer_error(H, cur[i], prev[i]);
+      res.flow_residual[i] = translating ? epipolar_line_distance(F, cur[i], prev[i])
+                                         : homography_transfer_error(H, cur[i], prev[i]);
       eps[i] = static_cast<float>(cfg_.epsilon_epipolar_px);
     }
   }
@@ -143,7 +323,8 @@ void DynamicFeatureFilter::epipolar_residuals(const std::vector<int>& fit, Dynam
   if (!use_h && f_in == 0) return;
   const cv::Matx33d M(use_h ? H : F(cv::Rect(0, 0, 3, 3)));
   for (std::size_t i = 0; i < cur.size(); ++i) {
-    res.flow_residual[i] = use_h ? transfer_error(M, prev[i], cur[i]) : line_distance(M, prev[i], cur[i]);
+    res.flow_residual[i] =
+        use_h ? homography_transfer_error(M, prev[i], cur[i]) : epipolar_line_distance(M, prev[i], cur[i]);
     eps[i] = static_cast<float>(cfg_.epsilon_epipolar_px);
   }
   res.residual_used = use_h ? "homography" : "epipolar";
