@@ -90,18 +90,23 @@ DynamicInput input(const Pair& p, bool depth, const Detections* det = nullptr) {
 TEST(MotionCheck, PanWithParallaxCompensatedByReprojection) {
   const Scene s;
   const Pair p = make_pair(s, 1.5, {0.04, 0, 0}, {0, 0.05});
-  MotionCheckConfig cfg;
-  cfg.mode = CullMode::kFlowOnly;
-  DynamicFeatureFilter f(cfg);
-  const DynamicResult r = f.process(input(p, true));
-  EXPECT_EQ(r.residual_used, "reprojection");
-  const Shares sh = shares(r, p.cur.label);
-  EXPECT_GT(sh.raw_flow_background, 5.0);  // the camera's own motion is large ...
-  EXPECT_GT(sh.count[0], 50);
-  EXPECT_GE(sh.count[2], 6);
-  EXPECT_LE(sh.moving[0], 0.03);  // ... yet the wall and the board stay static
-  EXPECT_LE(sh.moving[1], 0.03);
-  EXPECT_GE(sh.moving[2], 0.8);  // and the patch moves
+  for (const char* fit : {"ransac", "msac"}) {  // both camera-motion fits, no prediction given
+    SCOPED_TRACE(fit);
+    MotionCheckConfig cfg;
+    cfg.mode = CullMode::kFlowOnly;
+    cfg.ego_fit = fit;
+    cfg.ego_fit_threshold_px = 0.7;  // msac only
+    DynamicFeatureFilter f(cfg);
+    const DynamicResult r = f.process(input(p, true));
+    EXPECT_EQ(r.residual_used, "reprojection");
+    const Shares sh = shares(r, p.cur.label);
+    EXPECT_GT(sh.raw_flow_background, 5.0);  // the camera's own motion is large ...
+    EXPECT_GT(sh.count[0], 50);
+    EXPECT_GE(sh.count[2], 6);
+    EXPECT_LE(sh.moving[0], 0.03);  // ... yet the wall and the board stay static
+    EXPECT_LE(sh.moving[1], 0.03);
+    EXPECT_GE(sh.moving[2], 0.8);  // and the patch moves
+  }
 }
 
 TEST(MotionCheck, PanWithParallaxCompensatedByEpipolarDistance) {
@@ -573,6 +578,12 @@ TEST(MotionCheck, ConfigAndInputErrors) {
   EXPECT_THROW(
       MotionCheckConfig::from_yaml(ConfigReader::from_string("moving_ratio_threshold: 2\n", "m.yaml")),
       ConfigError);
+  EXPECT_THROW(MotionCheckConfig::from_yaml(ConfigReader::from_string("ego_fit: lmeds\n", "m.yaml")),
+               ConfigError);
+  const MotionCheckConfig msac = MotionCheckConfig::from_yaml(
+      ConfigReader::from_string("ego_fit: msac\nego_fit_threshold_px: 0.7\n", "m.yaml"));
+  EXPECT_EQ(msac.ego_fit, "msac");
+  EXPECT_DOUBLE_EQ(msac.ego_fit_threshold_px, 0.7);
   MotionCheckConfig bad;
   bad.always_dynamic_classes = {"unicorn"};
   EXPECT_THROW(DynamicFeatureFilter{bad}, ConfigError);
