@@ -108,8 +108,8 @@ std::optional<std::pair<cv::Matx33d, cv::Vec3d>> three_point_motion(const Motion
     if (!cv::solve(H, -g, d, cv::DECOMP_LU)) return std::nullopt;  // degenerate sample
     cv::Mat dR;
     cv::Rodrigues(cv::Vec3d(d[0], d[1], d[2]), dR);
-    R = cv::Matx33d(dR) * R;
-    t = cv::Matx33d(dR) * t + cv::Vec3d(d[3], d[4], d[5]);
+    R = cv::Matx33d(dR) * R;  // the model the Jacobian is of: q = exp(dw) R X + t + dt
+    t += cv::Vec3d(d[3], d[4], d[5]);
   }
   if (!cv::checkRange(cv::Mat(R)) || !cv::checkRange(cv::Mat(t))) return std::nullopt;
   return std::make_pair(R, t);
