@@ -42,19 +42,32 @@ double truncated_sum(const std::vector<double>& r2, double thr2) {
   return c;
 }
 
-// Truncated squared epipolar distance of the points without depth (rotation homography transfer when
-// the camera barely translates).
-double flat_cost(const MotionFitPoints& pts, const cv::Matx33d& K, const cv::Matx33d& R, const cv::Vec3d& t,
-                 double thr) {
+// Residual of a point without depth under the camera motion (R, t): its epipolar distance, or the
+// rotation homography's transfer error when the camera barely translates (the epipolar geometry is
+// degenerate then). Shared by the MSAC score and the per-point verdict.
+class DepthlessResidual {
+ public:
+  DepthlessResidual(const cv::Matx33d& K, const cv::Matx33d& Ki, const cv::Matx33d& R, const cv::Vec3d& t)
+      : translating_(cv::norm(t) > 1e-3), M_(translating_ ? Ki.t() * skew(t) * R * Ki : K * R * Ki) {}
+  // px, negative when undefined; `cur` in the current image, `prev` its match in the previous one.
+  [[nodiscard]] float operator()(const cv::Point2f& cur, const cv::Point2f& prev) const {
+    return translating_ ? epipolar_line_distance(M_, cur, prev) : homography_transfer_error(M_, cur, prev);
+  }
+
+ private:
+  bool translating_;
+  cv::Matx33d M_;
+};
+
+// Truncated squared residual of the points without depth.
+double flat_cost(const MotionFitPoints& pts, const cv::Matx33d& K, const cv::Matx33d& Ki,
+                 const cv::Matx33d& R, const cv::Vec3d& t, double thr) {
   if (pts.flat_cur_px.empty()) return 0.0;
-  const cv::Matx33d Ki = K.inv();
-  const bool translating = cv::norm(t) > 1e-3;
-  const cv::Matx33d M = translating ? Ki.t() * skew(t) * R * Ki : K * R * Ki;
+  const DepthlessResidual residual(K, Ki, R, t);
   const double thr2 = thr * thr;
   double c = 0.0;
   for (std::size_t i = 0; i < pts.flat_cur_px.size(); ++i) {
-    const cv::Point2f &y = pts.flat_cur_px[i], &x = pts.flat_prev_px[i];
-    const double d = translating ? epipolar_line_distance(M, y, x) : homography_transfer_error(M, y, x);
+    const double d = residual(pts.flat_cur_px[i], pts.flat_prev_px[i]);
     c += d < 0.0 ? thr2 : std::min(d * d, thr2);
   }
   return c;
@@ -137,6 +150,7 @@ std::optional<CameraMotion> fit_camera_motion_msac(const MotionFitPoints& pts, c
     return std::nullopt;
   const double thr2 = opt.threshold_px * opt.threshold_px;
   const cv::Mat Kcv(K);
+  const cv::Matx33d Ki = K.inv();
   std::vector<double> r2;
   double best = std::numeric_limits<double>::max();
   std::optional<std::pair<cv::Matx33d, cv::Vec3d>> best_motion;
@@ -144,7 +158,7 @@ std::optional<CameraMotion> fit_camera_motion_msac(const MotionFitPoints& pts, c
     squared_residuals(pts, K, R, t, r2);
     double c = truncated_sum(r2, thr2);
     if (c >= best) return;  // the flat points can only add
-    c += flat_cost(pts, K, R, t, opt.flat_threshold_px);
+    c += flat_cost(pts, K, Ki, R, t, opt.flat_threshold_px);
     if (c < best) best = c, best_motion.emplace(R, t);
   };
   const cv::Matx33d R0 = guess ? guess->R : cv::Matx33d::eye();
@@ -271,12 +285,8 @@ bool DynamicFeatureFilter::reprojection_residuals(const DynamicInput& in, const 
   cv::Rodrigues(rvec, Rm);
   const cv::Matx33d R(Rm);
   const cv::Vec3d t(tvec.at<double>(0), tvec.at<double>(1), tvec.at<double>(2));
-  const cv::Matx33d Kx(Kcv), Ki = Kx.inv();
-  // Points without usable depth: epipolar distance from the same motion, or the rotation
-  // homography when the camera barely translated (the epipolar geometry is degenerate then).
-  const bool translating = cv::norm(t) > 1e-3;
-  const cv::Matx33d F = Ki.t() * skew(t) * R * Ki;
-  const cv::Matx33d H = Kx * R * Ki;
+  const cv::Matx33d Kx(Kcv);
+  const DepthlessResidual depthless(Kx, Kx.inv(), R, t);  // points without usable depth
   for (std::size_t i = 0; i < n; ++i) {
     if (has_z[i]) {
       const cv::Vec3d q = R * cv::Vec3d(X[i].x, X[i].y, X[i].z) + t;
@@ -285,8 +295,7 @@ bool DynamicFeatureFilter::reprojection_residuals(const DynamicInput& in, const 
       res.flow_residual[i] = static_cast<float>(std::hypot(u - prev[i].x, v - prev[i].y));
       eps[i] = static_cast<float>(cfg_.epsilon_reprojection_px);
     } else {
-      res.flow_residual[i] = translating ? epipolar_line_distance(F, cur[i], prev[i])
-                                         : homography_transfer_error(H, cur[i], prev[i]);
+      res.flow_residual[i] = depthless(cur[i], prev[i]);
       eps[i] = static_cast<float>(cfg_.epsilon_epipolar_px);
     }
   }
