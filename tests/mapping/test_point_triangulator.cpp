@@ -85,9 +85,8 @@ Pair make_pair(const geo::SE3& T1, const geo::SE3& T2, const std::function<bool(
   return p;
 }
 
-PointTriangulator triangulator() {
-  return PointTriangulator(TriangulationConfig{}, geo::CameraIntrinsics{}, kBf,
-                           map::ScalePyramid::make(8, 1.2));
+PointTriangulator triangulator(const TriangulationConfig& config = {}) {
+  return PointTriangulator(config, geo::CameraIntrinsics{}, kBf, map::ScalePyramid::make(8, 1.2));
 }
 
 int visible_in_both(const Pair& p) {
@@ -181,10 +180,10 @@ cv::Mat flip_bits(const cv::Mat& d, int first, int count) {
 
 // Repeated texture beyond the depth sensor's range: in view 2 each point has a twin on its epipolar
 // line (where the same ray, 1.6x farther, lands) that looks MORE like view 1's corner than the true
-// one does (by default 7 bits off against 8). Neither view has depth, so nothing but the descriptors
+// one does (twin_bits off against true_bits). Neither view has depth, so nothing but the descriptors
 // tells the two apart: the wrong pair triangulates to the twin's place and reprojects exactly onto
 // both features. add_twins puts them into view 2 of p (made without depth) and returns how many.
-int add_twins(Pair& p, int true_bits = 8, int twin_bits = 7) {
+int add_twins(Pair& p, int true_bits, int twin_bits) {
   int twins = 0;
   const geo::CameraIntrinsics cam;
   const Eigen::Vector3d c1 = p.v1.T_cw.inverse().translation();
@@ -219,22 +218,25 @@ int wrong_points(const Pair& p, const std::vector<TriangulatedPoint>& pts) {
   return wrong;
 }
 
-TEST(PointTriangulator, AmbiguousMatchesWithoutDepthAreRefused) {
+// Twins added to a pair without depth (the true corner `true_bits` off view 1's, the twin `twin_bits`):
+// with `loose_ratio` the twins win and make wrong points, the default refuses every ambiguous pair, and
+// points whose twin fell outside the image are still made.
+void expect_twins_refused(int true_bits, int twin_bits, double loose_ratio) {
   const auto none = [](int) { return false; };
   Pair p = make_pair(pose(0.0, {0, 0, 0}), pose(0.1, {0.4, 0.05, 0.1}), none, none);
-  const int twins = add_twins(p);
+  const int twins = add_twins(p, true_bits, twin_bits);
   ASSERT_GT(twins, 50);
-  // The rule off (ratio 1, the matcher before 2026-12-03): the twins win and make wrong points.
-  TriangulationConfig off;
-  off.mono_match_ratio = 1.0;
-  const auto before = PointTriangulator(off, geo::CameraIntrinsics{}, kBf, map::ScalePyramid::make(8, 1.2))
-                          .triangulate(p.v1, p.v2);
-  EXPECT_GT(wrong_points(p, before), twins / 2);
-  // The default: an ambiguous pair makes no point at all.
+  TriangulationConfig loose;
+  loose.mono_match_ratio = loose_ratio;
+  EXPECT_GT(wrong_points(p, triangulator(loose).triangulate(p.v1, p.v2)), twins / 2);
   const auto after = triangulator().triangulate(p.v1, p.v2);
   EXPECT_EQ(wrong_points(p, after), 0);
-  // Points whose twin fell outside the image are still made.
   EXPECT_GE(static_cast<int>(after.size()), (visible_in_both(p) - twins) * 8 / 10);
+}
+
+TEST(PointTriangulator, AmbiguousMatchesWithoutDepthAreRefused) {
+  // The twin 7 bits off, the truth 8; loose: the rule off (ratio 1, the matcher before 2026-12-03).
+  expect_twins_refused(8, 7, 1.0);
 }
 
 TEST(PointTriangulator, ATwinClearlyCloserThanTheTruthIsStillRefused) {
@@ -242,18 +244,7 @@ TEST(PointTriangulator, ATwinClearlyCloserThanTheTruthIsStillRefused) {
   // than its neighbour brick's corner differs from it (10 bits), so the wrong copy wins by a ratio of
   // 0.67. The session-15 ratio (0.7) let that through; the default asks the best match to be under 0.6
   // of the runner-up, so the pair makes no point.
-  const auto none = [](int) { return false; };
-  Pair p = make_pair(pose(0.0, {0, 0, 0}), pose(0.1, {0.4, 0.05, 0.1}), none, none);
-  const int twins = add_twins(p, 15, 10);
-  ASSERT_GT(twins, 50);
-  TriangulationConfig loose;
-  loose.mono_match_ratio = 0.7;
-  const auto before = PointTriangulator(loose, geo::CameraIntrinsics{}, kBf, map::ScalePyramid::make(8, 1.2))
-                          .triangulate(p.v1, p.v2);
-  EXPECT_GT(wrong_points(p, before), twins / 2);
-  const auto after = triangulator().triangulate(p.v1, p.v2);
-  EXPECT_EQ(wrong_points(p, after), 0);
-  EXPECT_GE(static_cast<int>(after.size()), (visible_in_both(p) - twins) * 8 / 10);
+  expect_twins_refused(15, 10, 0.7);
 }
 
 TEST(PointTriangulator, DistinctMatchesWithoutDepthStillPassTheRatio) {
