@@ -242,7 +242,7 @@ TEST(PointTriangulator, AmbiguousMatchesWithoutDepthAreRefused) {
 TEST(PointTriangulator, ATwinClearlyCloserThanTheTruthIsStillRefused) {
   // A brick wall beyond the sensor's range seen with motion blur: the true corner changed more (15 bits)
   // than its neighbour brick's corner differs from it (10 bits), so the wrong copy wins by a ratio of
-  // 0.67. The session-15 ratio (0.7) let that through; the default asks the best match to be under 0.6
+  // 0.67. The session-15 ratio (0.7) let that through; the default asks the best match to be under 0.5
   // of the runner-up, so the pair makes no point.
   expect_twins_refused(15, 10, 0.7);
 }

@@ -136,6 +136,44 @@ TEST_F(TrackerTest, ASuddenStopIsTrackedAtTheTruePose) {
   }
 }
 
+// Carried back: 1 cm a frame for 20 frames, then the camera is at the start again and stands still.
+// The pose found there is 20 cm from the constant-velocity guess: a jump, not a motion, so it must
+// not become the velocity (the next frame would be predicted 20 cm further on). A stop (2 cm off the
+// guess) is a motion and keeps it.
+TEST_F(TrackerTest, AJumpIsNotTakenAsTheNextFramesMotion) {
+  auto t = make_tracker();
+  constexpr std::size_t kWalk = 20;
+  const auto truth = [](std::size_t i) {
+    return testing::camera_pose(Eigen::Vector3d(i < kWalk ? 0.01 * static_cast<double>(i) : 0.0, 0, 0), 0);
+  };
+  for (std::size_t i = 0; i < kWalk + 5; ++i) {
+    Frame f = testing::synthetic_frame(scene_, truth(i), i, cam_, depth_.bf);
+    ASSERT_EQ(t->track(f, {}).state, TrackingState::Ok) << "frame " << i;
+    if (i == kWalk) {
+      EXPECT_FALSE(t->predicted_motion().has_value()) << "the jump became the velocity";
+    } else if (i > 0) {
+      ASSERT_TRUE(t->predicted_motion().has_value()) << "frame " << i;
+    }
+  }
+  EXPECT_EQ(t->motion_breaks(), 1u);
+  for (std::size_t i = kWalk; i < kWalk + 5; ++i) {
+    const auto T_wc = written(*t, i);
+    ASSERT_TRUE(T_wc.has_value()) << i;
+    EXPECT_LT(pose_deviation(T_wc->inverse(), truth(i)).translation_m, 1e-3) << "frame " << i;
+  }
+}
+
+TEST_F(TrackerTest, ASuddenStopKeepsTheMotionModel) {
+  auto t = make_tracker();
+  for (std::size_t i = 0; i < 20; ++i) {
+    const double x = 0.02 * static_cast<double>(std::min<std::size_t>(i, 15));
+    Frame f = testing::synthetic_frame(scene_, testing::camera_pose(Eigen::Vector3d(x, 0, 0), 0), i, cam_,
+                                       depth_.bf);
+    ASSERT_EQ(t->track(f, {}).state, TrackingState::Ok) << "frame " << i;
+  }
+  EXPECT_EQ(t->motion_breaks(), 0u);
+}
+
 TEST_F(TrackerTest, ReportsHowLongEachFrameHeldTheMapLock) {
   auto t = make_tracker();
   for (std::size_t i = 0; i < 10; ++i) {

@@ -22,9 +22,9 @@ struct TriangulationConfig {
   // A match where neither feature has depth must be distinct along its epipolar band: best Hamming
   // distance <= this share of the second best, or of max_descriptor_distance when that is lower
   // (Lowe's ratio; 1: off). Nothing else checks such a pair: any two features on the epipolar line
-  // triangulate to a point that reprojects onto both. 0.6 since session 28 (0.7 before: a brick wall
-  // beyond the sensor's range then held the pose; docs/tracking_precision.md).
-  double mono_match_ratio = 0.6;
+  // triangulate to a point that reprojects onto both. 0.5 since session 29 (0.7 until session 28, then
+  // 0.6: a brick wall beyond the sensor's range held the pose; docs/tracking_precision.md).
+  double mono_match_ratio = 0.5;
   static TriangulationConfig from_yaml(const ConfigReader& r);
 };
 

@@ -477,6 +477,7 @@ nlohmann::json SlamSystem::statistics() {
                      {"resolved", tracker_.guard_stats().resolved},
                      {"keyframes_vetoed", tracker_.guard_stats().keyframes_vetoed},
                      {"keyframes_despite_jump", tracker_.guard_stats().keyframes_despite_jump}};
+  j["motion_breaks"] = tracker_.motion_breaks();
   j["subpixel"] = {{"enabled", config_.tracker.subpixel.enabled},
                    {"frames", tracker_.subpixel_stats().frames},
                    {"candidates", tracker_.subpixel_stats().candidates},

@@ -27,6 +27,8 @@ TrackerConfig TrackerConfig::from_yaml(const ConfigReader& r) {
   r.read("relocalization_verify_frames", c.relocalization_verify_frames, 0, 300);
   r.read("relocalization_max_step_m", c.relocalization_max_step_m, 0.001, 10.0);
   r.read("relocalization_max_step_deg", c.relocalization_max_step_deg, 0.01, 180.0);
+  r.read("motion_break_m", c.motion_break_m, 0.001, 10.0);
+  r.read("motion_break_deg", c.motion_break_deg, 0.01, 180.0);
   r.read("new_map_after_lost_frames", c.new_map_after_lost_frames, 0, 100000);
   r.read("merge_search_interval", c.merge_search_interval, 1, 10000);
   c.pose = opt::PoseOptimizerConfig::from_yaml(r.section("pose_optimizer"));
@@ -171,7 +173,14 @@ TrackOutcome Tracker::track_frame(Frame& frame, const MappingStatus& mapping) {
       map::MapView view = map_.view(&lock_clock_);
       counters_.apply(view);
       if (ok) {
-        if (last_frame_.has_pose) velocity_ = frame.T_cw * last_frame_.T_cw.inverse();
+        if (predicted && breaks_motion(frame.T_cw, *predicted)) {
+          // A pose found far from the prediction is a jump (carried, replayed frames, a fixed error),
+          // not a motion: extrapolated, it would put the next frame as far off again.
+          ++motion_breaks_;
+          velocity_.reset();
+        } else if (last_frame_.has_pose) {
+          velocity_ = frame.T_cw * last_frame_.T_cw.inverse();
+        }
         state_ = TrackingState::Ok;
         // No keyframe from a pose that is not verified yet.
         if (verify_left_ == 0 && need_keyframe(view, frame, mapping)) {
@@ -285,6 +294,11 @@ void Tracker::refresh_last_frame(const map::MapReader& view) {
     big_changes_seen_ = map_.big_change_count();
     velocity_.reset();  // the old velocity mixes poses from before and after the correction
   }
+}
+
+bool Tracker::breaks_motion(const geo::SE3& found_T_cw, const geo::SE3& predicted_T_cw) const {
+  const PoseDeviation d = pose_deviation(found_T_cw, predicted_T_cw);
+  return d.translation_m > config_.motion_break_m || d.rotation_deg > config_.motion_break_deg;
 }
 
 bool Tracker::track_motion_model(Frame& frame) {

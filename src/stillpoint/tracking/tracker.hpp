@@ -48,6 +48,11 @@ struct TrackerConfig {
   int relocalization_verify_frames = 3;
   double relocalization_max_step_m = 0.05;   // m, camera-centre deviation allowed while verifying
   double relocalization_max_step_deg = 5.0;  // deg, rotation deviation allowed while verifying
+  // A tracked pose this far from the constant-velocity prediction is a jump, not a motion: the step is
+  // not the next frame's velocity (that frame is found from the reference keyframe, as after a
+  // relocalisation). Without it a frame after a jump was predicted a whole jump further on.
+  double motion_break_m = 0.05;
+  double motion_break_deg = 5.0;
   // Atlas (docs/robustness.md "New maps and merging"): after this many consecutive frames without a
   // trusted pose, a lost frame that fails to relocalise and has init_min_features depth features starts
   // a new map, seeded at the last trusted pose; while more than one map is open, tracked frames look for
@@ -141,6 +146,8 @@ class Tracker {
   // Maps holding keyframes that were not merged into another, ascending (map 0 first).
   [[nodiscard]] const std::vector<map::MapId>& open_maps() const { return open_maps_; }
   [[nodiscard]] const PoseGuardStats& guard_stats() const { return guard_stats_; }
+  // Tracked frames whose pose broke the constant-velocity motion (TrackerConfig::motion_break_m).
+  [[nodiscard]] std::size_t motion_breaks() const { return motion_breaks_; }
   [[nodiscard]] const AnchorRefinerStats& subpixel_stats() const { return refiner_.stats(); }
   [[nodiscard]] const TrajectoryRecorder& trajectory() const { return trajectory_; }
   [[nodiscard]] const KeyframePolicy& policy() const { return *policy_; }
@@ -152,6 +159,7 @@ class Tracker {
   // Writes the tracked frame's pose relative to its reference keyframe (held back while verifying).
   void record_pose(Frame& frame, const geo::SE3& reference_T_cw, TrackOutcome& out);
   bool initialize(map::MapView& view, Frame& frame);
+  [[nodiscard]] bool breaks_motion(const geo::SE3& found_T_cw, const geo::SE3& predicted_T_cw) const;
   bool track_motion_model(Frame& frame);
   bool track_reference_keyframe(Frame& frame);
   bool relocalize(Frame& frame);
@@ -254,6 +262,7 @@ class Tracker {
   TrajectoryRecorder trajectory_;
   PoseGuardRules guard_;
   PoseGuardStats guard_stats_;
+  std::size_t motion_breaks_ = 0;
   AnchorRefiner refiner_;
   std::vector<bool> refined_;      // per feature of the frame being tracked: position aligned with the anchor
   LocalMapSnapshot snapshot_;      // the map records this frame reads, copied under short readers
