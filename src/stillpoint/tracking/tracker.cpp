@@ -173,7 +173,8 @@ TrackOutcome Tracker::track_frame(Frame& frame, const MappingStatus& mapping) {
       map::MapView view = map_.view(&lock_clock_);
       counters_.apply(view);
       if (ok) {
-        if (predicted && breaks_motion(frame.T_cw, *predicted)) {
+        if (predicted && !pose_deviation(frame.T_cw, *predicted)
+                              .within(config_.motion_break_m, config_.motion_break_deg)) {
           // A pose found far from the prediction is a jump (carried, replayed frames, a fixed error),
           // not a motion: extrapolated, it would put the next frame as far off again.
           ++motion_breaks_;
@@ -294,11 +295,6 @@ void Tracker::refresh_last_frame(const map::MapReader& view) {
     big_changes_seen_ = map_.big_change_count();
     velocity_.reset();  // the old velocity mixes poses from before and after the correction
   }
-}
-
-bool Tracker::breaks_motion(const geo::SE3& found_T_cw, const geo::SE3& predicted_T_cw) const {
-  const PoseDeviation d = pose_deviation(found_T_cw, predicted_T_cw);
-  return d.translation_m > config_.motion_break_m || d.rotation_deg > config_.motion_break_deg;
 }
 
 bool Tracker::track_motion_model(Frame& frame) {

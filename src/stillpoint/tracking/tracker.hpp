@@ -159,7 +159,6 @@ class Tracker {
   // Writes the tracked frame's pose relative to its reference keyframe (held back while verifying).
   void record_pose(Frame& frame, const geo::SE3& reference_T_cw, TrackOutcome& out);
   bool initialize(map::MapView& view, Frame& frame);
-  [[nodiscard]] bool breaks_motion(const geo::SE3& found_T_cw, const geo::SE3& predicted_T_cw) const;
   bool track_motion_model(Frame& frame);
   bool track_reference_keyframe(Frame& frame);
   bool relocalize(Frame& frame);
