@@ -478,6 +478,7 @@ nlohmann::json SlamSystem::statistics() {
                      {"keyframes_vetoed", tracker_.guard_stats().keyframes_vetoed},
                      {"keyframes_despite_jump", tracker_.guard_stats().keyframes_despite_jump}};
   j["motion_breaks"] = tracker_.motion_breaks();
+  j["new_points_moving"] = tracker_.new_points_moving();
   j["subpixel"] = {{"enabled", config_.tracker.subpixel.enabled},
                    {"frames", tracker_.subpixel_stats().frames},
                    {"candidates", tracker_.subpixel_stats().candidates},

@@ -35,6 +35,7 @@ TrackerConfig TrackerConfig::from_yaml(const ConfigReader& r) {
   c.keyframes = KeyframePolicyConfig::from_yaml(r.section("keyframes"));
   c.guard = PoseGuardConfig::from_yaml(r.section("pose_guard"));
   c.subpixel = AnchorRefinerConfig::from_yaml(r.section("subpixel"));
+  c.new_point_motion = NewPointMotionCheckConfig::from_yaml(r.section("new_point_motion"));
   return c;
 }
 
@@ -61,7 +62,8 @@ Tracker::Tracker(map::Map& map, TrackerConfig config, geo::CameraIntrinsics came
       policy_(make_keyframe_policy(config_.keyframes)),
       camera_model_{camera.fx, camera.fy, camera.cx, camera.cy, depth.bf},
       guard_(config_.guard),
-      refiner_(config_.subpixel, camera, pyramid_) {}
+      refiner_(config_.subpixel, camera, pyramid_),
+      new_point_check_(config_.new_point_motion, camera) {}
 
 void Tracker::start_in_existing_map() {
   // Lost, not NotInitialized: the next frames go through relocalize() and never create a map at
@@ -205,7 +207,7 @@ TrackOutcome Tracker::track_frame(Frame& frame, const MappingStatus& mapping) {
       }
     }
     if (make_keyframe) {
-      KeyframeDraft draft = draft_keyframe(frame);
+      KeyframeDraft draft = draft_keyframe(frame, /*check_motion=*/true);
       map::MapView view = map_.view(&lock_clock_);
       if (map_.big_change_count() != changes_at_read) {
         // A loop correction moved the map while this frame was tracked on copies: its pose is in
@@ -587,7 +589,7 @@ bool Tracker::need_keyframe(const map::MapReader& view, const Frame& frame,
   return policy_->decide(c);
 }
 
-Tracker::KeyframeDraft Tracker::draft_keyframe(const Frame& frame) const {
+Tracker::KeyframeDraft Tracker::draft_keyframe(const Frame& frame, bool check_motion) const {
   KeyframeDraft d;
   map::Keyframe& kf = d.keyframe;
   kf.map_id = current_map_;
@@ -605,11 +607,31 @@ Tracker::KeyframeDraft Tracker::draft_keyframe(const Frame& frame) const {
   std::iota(d.by_depth.begin(), d.by_depth.end(), 0);
   std::sort(d.by_depth.begin(), d.by_depth.end(),
             [&](std::size_t a, std::size_t b) { return frame.features.depth[a] < frame.features.depth[b]; });
+  if (check_motion) d.moved = moved_new_point_candidates(frame);
   return d;
+}
+
+std::vector<bool> Tracker::moved_new_point_candidates(const Frame& frame) const {
+  std::vector<bool> moved(frame.features.size(), false);
+  if (!new_point_check_.config().enabled() || !last_frame_.has_pose || last_frame_.gray.empty()) return moved;
+  std::vector<Eigen::Vector2d> px;
+  std::vector<double> depth;
+  std::vector<std::size_t> which;
+  for (std::size_t i = 0; i < frame.features.size(); ++i) {
+    if (frame.features.depth[i] <= 0 || (frame.points[i] != map::kNoPoint && !frame.outlier[i])) continue;
+    px.emplace_back(frame.features.keypoints[i].pt.x, frame.features.keypoints[i].pt.y);
+    depth.push_back(frame.features.depth[i]);
+    which.push_back(i);
+  }
+  const std::vector<bool> still = new_point_check_.static_candidates(
+      last_frame_.gray, frame.gray, last_frame_.T_cw * frame.T_cw.inverse(), px, depth);
+  for (std::size_t k = 0; k < which.size(); ++k) moved[which[k]] = !still[k];
+  return moved;
 }
 
 map::KeyframeId Tracker::create_keyframe(map::MapView& view, Frame& frame, KeyframeDraft draft,
                                          bool all_depth_points) {
+  const std::vector<bool> moved = std::move(draft.moved);
   const map::KeyframeId kid = view.add_keyframe(std::move(draft.keyframe));
   map::Keyframe* stored = view.keyframe(kid);
 
@@ -621,6 +643,10 @@ map::KeyframeId Tracker::create_keyframe(map::MapView& view, Frame& frame, Keyfr
     if (d <= 0) continue;
     if (!all_depth_points && d > depth_.close_depth && created >= config_.new_points_min) break;
     if (stored->points[i] != map::kNoPoint) continue;
+    if (i < moved.size() && moved[i]) {
+      ++new_points_moving_;
+      continue;
+    }
     const auto& kp = frame.features.keypoints[i];
     map::MapPoint p;
     p.position = T_wc * camera_.unproject({kp.pt.x, kp.pt.y}, d);

@@ -19,6 +19,7 @@
 #include "stillpoint/tracking/frame.hpp"
 #include "stillpoint/tracking/keyframe_policy.hpp"
 #include "stillpoint/tracking/local_map_snapshot.hpp"
+#include "stillpoint/tracking/new_point_motion_check.hpp"
 #include "stillpoint/tracking/pose_guard.hpp"
 #include "stillpoint/tracking/trajectory_recorder.hpp"
 
@@ -66,6 +67,7 @@ struct TrackerConfig {
   KeyframePolicyConfig keyframes;
   PoseGuardConfig guard;
   AnchorRefinerConfig subpixel;
+  NewPointMotionCheckConfig new_point_motion;  // a keyframe's new points must have moved as static points
   static TrackerConfig from_yaml(const ConfigReader& r);
 };
 
@@ -148,6 +150,8 @@ class Tracker {
   [[nodiscard]] const PoseGuardStats& guard_stats() const { return guard_stats_; }
   // Tracked frames whose pose broke the constant-velocity motion (TrackerConfig::motion_break_m).
   [[nodiscard]] std::size_t motion_breaks() const { return motion_breaks_; }
+  // Keyframe candidates for new points whose flow disagreed with the tracked motion (not made points).
+  [[nodiscard]] std::size_t new_points_moving() const { return new_points_moving_; }
   [[nodiscard]] const AnchorRefinerStats& subpixel_stats() const { return refiner_.stats(); }
   [[nodiscard]] const TrajectoryRecorder& trajectory() const { return trajectory_; }
   [[nodiscard]] const KeyframePolicy& policy() const { return *policy_; }
@@ -202,11 +206,16 @@ class Tracker {
   struct KeyframeDraft {
     map::Keyframe keyframe;
     std::vector<std::size_t> by_depth;  // features, closest first
+    std::vector<bool> moved;            // per feature: no new point, it moved against the last frame
   };
-  [[nodiscard]] KeyframeDraft draft_keyframe(const Frame& frame) const;
+  // check_motion: new-point candidates are checked against the motion from the last frame
+  // (NewPointMotionCheck), outside the lock like the rest of the draft.
+  [[nodiscard]] KeyframeDraft draft_keyframe(const Frame& frame, bool check_motion = false) const;
   // all_depth_points: every feature with depth makes a point, not only the close ones.
   map::KeyframeId create_keyframe(map::MapView& view, Frame& frame, KeyframeDraft draft,
                                   bool all_depth_points);
+  // Per feature of the frame: true where new_point_check_ finds it moved against the last frame.
+  [[nodiscard]] std::vector<bool> moved_new_point_candidates(const Frame& frame) const;
 
   map::Map& map_;
   TrackerConfig config_;
@@ -262,6 +271,8 @@ class Tracker {
   PoseGuardRules guard_;
   PoseGuardStats guard_stats_;
   std::size_t motion_breaks_ = 0;
+  NewPointMotionCheck new_point_check_;
+  std::size_t new_points_moving_ = 0;
   AnchorRefiner refiner_;
   std::vector<bool> refined_;      // per feature of the frame being tracked: position aligned with the anchor
   LocalMapSnapshot snapshot_;      // the map records this frame reads, copied under short readers
