@@ -15,8 +15,9 @@ namespace sp::track {
 
 struct NewPointMotionCheckConfig {
   // px: a candidate whose flow lands farther than this from where the tracked poses put it is not made
-  // a point. 0: off (every candidate is made, ORB-SLAM's rule).
-  double max_residual_px = 0.0;
+  // a point. 0: off (every candidate is made, ORB-SLAM's rule). 3 passed the fresh-room rule of session
+  // 30 (docs/dynamic.md "New points must move as the camera did").
+  double max_residual_px = 3.0;
   double fb_max_px = 0.5;  // forward-backward flow error above which the flow is unknown (point kept)
   int lk_window = 9;
   int lk_levels = 3;

@@ -625,7 +625,12 @@ std::vector<bool> Tracker::moved_new_point_candidates(const Frame& frame) const 
   }
   const std::vector<bool> still = new_point_check_.static_candidates(
       last_frame_.gray, frame.gray, last_frame_.T_cw * frame.T_cw.inverse(), px, depth);
-  for (std::size_t k = 0; k < which.size(); ++k) moved[which[k]] = !still[k];
+  for (std::size_t k = 0; k < which.size(); ++k) {
+    moved[which[k]] = !still[k];
+    if (moved[which[k]])
+      spdlog::debug("frame {}: no new point at ({:.1f}, {:.1f}), depth {:.2f} m: it moved against the camera",
+                    frame.index, px[k].x(), px[k].y(), depth[k]);
+  }
   return moved;
 }
 
