@@ -1,5 +1,6 @@
 #include "stillpoint/tracking/new_point_motion_check.hpp"
 
+#include <algorithm>
 #include <opencv2/video/tracking.hpp>
 
 #include "stillpoint/common/error.hpp"
@@ -46,15 +47,19 @@ std::vector<bool> NewPointMotionCheck::static_candidates(const cv::Mat& prev_gra
   if (cur.empty()) return ok;
   // Flow from the current image back to the previous one, started at the static prediction, checked
   // by flowing forward again.
+  // Each image's pyramid is built once and serves both directions.
   const cv::Size win(config_.lk_window, config_.lk_window);
   const cv::TermCriteria term(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 20, 0.03);
-  std::vector<cv::Point2f> back = predicted, fwd;
+  std::vector<cv::Mat> pyr_cur, pyr_prev;
+  const int levels_cur = cv::buildOpticalFlowPyramid(cur_gray, pyr_cur, win, config_.lk_levels);
+  const int levels_prev = cv::buildOpticalFlowPyramid(prev_gray, pyr_prev, win, config_.lk_levels);
+  const int levels = std::min(levels_cur, levels_prev);
+  std::vector<cv::Point2f> back = predicted, fwd = cur;
   std::vector<uchar> st_back, st_fwd;
   std::vector<float> err;
-  cv::calcOpticalFlowPyrLK(cur_gray, prev_gray, cur, back, st_back, err, win, config_.lk_levels, term,
+  cv::calcOpticalFlowPyrLK(pyr_cur, pyr_prev, cur, back, st_back, err, win, levels, term,
                            cv::OPTFLOW_USE_INITIAL_FLOW);
-  fwd = cur;
-  cv::calcOpticalFlowPyrLK(prev_gray, cur_gray, back, fwd, st_fwd, err, win, config_.lk_levels, term,
+  cv::calcOpticalFlowPyrLK(pyr_prev, pyr_cur, back, fwd, st_fwd, err, win, levels, term,
                            cv::OPTFLOW_USE_INITIAL_FLOW);
   const double fb2 = config_.fb_max_px * config_.fb_max_px;
   const double max2 = config_.max_residual_px * config_.max_residual_px;

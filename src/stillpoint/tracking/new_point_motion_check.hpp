@@ -2,7 +2,9 @@
 // A keyframe makes map points straight from depth; a point on something moving that culling let
 // through (a person entering at the image border, never boxed) then drags the following frames' poses
 // with it. Before a point is made, this check follows its pixel back to the previous frame by optical
-// flow and asks whether it moved as the tracked camera motion says a static point would.
+// flow and asks whether it moved as the tracked camera motion says a static point would. Its own LK,
+// not the culling's: that flow covers a bucketed subset of the keypoints and is absent with culling off,
+// and this one runs on keyframes only.
 #include <Eigen/Core>
 #include <opencv2/core.hpp>
 #include <vector>

@@ -607,18 +607,19 @@ Tracker::KeyframeDraft Tracker::draft_keyframe(const Frame& frame, bool check_mo
   std::iota(d.by_depth.begin(), d.by_depth.end(), 0);
   std::sort(d.by_depth.begin(), d.by_depth.end(),
             [&](std::size_t a, std::size_t b) { return frame.features.depth[a] < frame.features.depth[b]; });
-  if (check_motion) d.moved = moved_new_point_candidates(frame);
+  if (check_motion) d.moved = moved_new_point_candidates(frame, kf.points);
   return d;
 }
 
-std::vector<bool> Tracker::moved_new_point_candidates(const Frame& frame) const {
+std::vector<bool> Tracker::moved_new_point_candidates(const Frame& frame,
+                                                      const std::vector<map::PointId>& slots) const {
   std::vector<bool> moved(frame.features.size(), false);
-  if (!new_point_check_.config().enabled() || !last_frame_.has_pose || last_frame_.gray.empty()) return moved;
+  if (!new_point_check_.config().enabled() || !last_frame_.has_pose) return moved;
   std::vector<Eigen::Vector2d> px;
   std::vector<double> depth;
   std::vector<std::size_t> which;
   for (std::size_t i = 0; i < frame.features.size(); ++i) {
-    if (frame.features.depth[i] <= 0 || (frame.points[i] != map::kNoPoint && !frame.outlier[i])) continue;
+    if (frame.features.depth[i] <= 0 || slots[i] != map::kNoPoint) continue;
     px.emplace_back(frame.features.keypoints[i].pt.x, frame.features.keypoints[i].pt.y);
     depth.push_back(frame.features.depth[i]);
     which.push_back(i);
@@ -636,7 +637,6 @@ std::vector<bool> Tracker::moved_new_point_candidates(const Frame& frame) const 
 
 map::KeyframeId Tracker::create_keyframe(map::MapView& view, Frame& frame, KeyframeDraft draft,
                                          bool all_depth_points) {
-  const std::vector<bool> moved = std::move(draft.moved);
   const map::KeyframeId kid = view.add_keyframe(std::move(draft.keyframe));
   map::Keyframe* stored = view.keyframe(kid);
 
@@ -648,7 +648,7 @@ map::KeyframeId Tracker::create_keyframe(map::MapView& view, Frame& frame, Keyfr
     if (d <= 0) continue;
     if (!all_depth_points && d > depth_.close_depth && created >= config_.new_points_min) break;
     if (stored->points[i] != map::kNoPoint) continue;
-    if (i < moved.size() && moved[i]) {
+    if (i < draft.moved.size() && draft.moved[i]) {
       ++new_points_moving_;
       continue;
     }

@@ -214,8 +214,10 @@ class Tracker {
   // all_depth_points: every feature with depth makes a point, not only the close ones.
   map::KeyframeId create_keyframe(map::MapView& view, Frame& frame, KeyframeDraft draft,
                                   bool all_depth_points);
-  // Per feature of the frame: true where new_point_check_ finds it moved against the last frame.
-  [[nodiscard]] std::vector<bool> moved_new_point_candidates(const Frame& frame) const;
+  // Per feature of the frame: true where new_point_check_ finds it moved against the last frame. The
+  // candidates are the features with depth and no point in `slots` (the drafted keyframe's).
+  [[nodiscard]] std::vector<bool> moved_new_point_candidates(const Frame& frame,
+                                                             const std::vector<map::PointId>& slots) const;
 
   map::Map& map_;
   TrackerConfig config_;
