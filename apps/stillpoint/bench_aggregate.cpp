@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <map>
+#include <regex>
 #include <utility>
 
 namespace sp::app::bench {
@@ -225,6 +226,31 @@ nlohmann::json to_json(const SummaryRow& r) {
           {"oracle_pairs", r.oracle_pairs},
           {"oracle_ratio_median", opt(r.oracle_ratio_median)},
           {"oracle_ratio_worst", opt(r.oracle_ratio_worst)}};
+}
+
+namespace {
+// The number of the last match of `re` (its first group) in `text`.
+std::optional<double> last_number(const std::string& text, const std::regex& re) {
+  std::optional<double> last;
+  for (auto it = std::sregex_iterator(text.begin(), text.end(), re); it != std::sregex_iterator(); ++it) {
+    try {
+      last = std::stod((*it)[1].str());
+    } catch (const std::exception&) {
+    }
+  }
+  return last;
+}
+}  // namespace
+
+PeerSpeed peer_speed(const std::string& log, std::size_t frames, double fallback_wall_s) {
+  PeerSpeed p;
+  const auto loop_wall = last_number(log, std::regex(R"(with shutdown:\s*([0-9.]+)\s*s)"));
+  p.frame_loop = loop_wall.has_value();
+  p.wall_s = loop_wall.value_or(last_number(log, std::regex(R"(wall=([0-9.]+)s)")).value_or(fallback_wall_s));
+  p.fps = p.wall_s > 0 ? static_cast<double>(frames) / p.wall_s : 0.0;
+  if (const auto t = last_number(log, std::regex(R"(median tracking time:\s*([0-9.eE+-]+))")))
+    p.track_ms = *t * 1000.0;
+  return p;
 }
 
 }  // namespace sp::app::bench

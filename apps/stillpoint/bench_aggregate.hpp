@@ -79,4 +79,16 @@ nlohmann::json to_json(const RunMetrics& m);
 nlohmann::json to_json(const AggregateRow& r);
 nlohmann::json to_json(const SummaryRow& r);
 
+// A peer's speed from its logs (run.sh's output and the example's own): like for like with ours
+// (frames / wall of the frame loop and the final drain) where the example prints "loop wall ... with
+// shutdown: B s" (the measurement edit of scripts/speed_vs_ngd.sh); else run.sh's "wall=Ws" of the
+// whole binary, vocabulary loading included; else `fallback_wall_s`.
+struct PeerSpeed {
+  double wall_s = 0;
+  double fps = 0;
+  bool frame_loop = false;  // wall_s is the frame loop's (comparable with ours)
+  std::optional<double> track_ms;  // the example's "median tracking time", ms
+};
+PeerSpeed peer_speed(const std::string& log, std::size_t frames, double fallback_wall_s);
+
 }  // namespace sp::app::bench

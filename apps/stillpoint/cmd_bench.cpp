@@ -15,7 +15,6 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <optional>
-#include <regex>
 #include <set>
 #include <sstream>
 
@@ -43,6 +42,7 @@ struct BenchArgs {
   int repeats = 1;
   std::vector<std::string> variant_specs;  // "name=run args"
   std::vector<std::string> peers;
+  std::string peer_pace = "flat";  // flat: peers as fast as they can, like our runs | recorded: 30 Hz
   std::string ablation = "none";
   std::string detector_model;
   std::string config;
@@ -96,16 +96,31 @@ std::vector<Variant> variants_for(const std::string& ablation) {
   throw Error("unknown ablation '" + ablation + "' (none|dynamic|keyframes|loop)");
 }
 
-int spawn_and_wait(const std::vector<std::string>& argv, const std::filesystem::path& log) {
+// `env_set`: NAME=VALUE entries that replace or add to this process's environment in the child.
+int spawn_and_wait(const std::vector<std::string>& argv, const std::filesystem::path& log,
+                   const std::vector<std::string>& env_set = {}) {
   std::vector<char*> cargv;
   for (const auto& a : argv) cargv.push_back(const_cast<char*>(a.c_str()));
   cargv.push_back(nullptr);
+  std::vector<std::string> env_strings;
+  for (char** e = environ; *e != nullptr; ++e) {
+    const std::string entry(*e);
+    const std::string name = entry.substr(0, entry.find('='));
+    const bool replaced = std::any_of(env_set.begin(), env_set.end(), [&](const std::string& set) {
+      return set.compare(0, name.size() + 1, name + "=") == 0;
+    });
+    if (!replaced) env_strings.push_back(entry);
+  }
+  env_strings.insert(env_strings.end(), env_set.begin(), env_set.end());
+  std::vector<char*> cenv;
+  for (auto& e : env_strings) cenv.push_back(e.data());
+  cenv.push_back(nullptr);
   posix_spawn_file_actions_t actions;
   posix_spawn_file_actions_init(&actions);
   posix_spawn_file_actions_addopen(&actions, 1, log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
   posix_spawn_file_actions_adddup2(&actions, 1, 2);
   pid_t pid = 0;
-  const int rc = posix_spawn(&pid, cargv[0], &actions, nullptr, cargv.data(), environ);
+  const int rc = posix_spawn(&pid, cargv[0], &actions, nullptr, cargv.data(), cenv.data());
   posix_spawn_file_actions_destroy(&actions);
   if (rc != 0) throw Error("cannot start " + argv[0]);
   int status = 0;
@@ -378,27 +393,19 @@ std::filesystem::path cut_sequence(const std::filesystem::path& seq, std::size_t
   return where;
 }
 
-std::optional<double> number_after(const std::string& text, const std::regex& re) {
-  std::smatch m;
-  std::optional<double> last;
-  for (auto it = text.cbegin(); std::regex_search(it, text.cend(), m, re); it = m[0].second) {
-    try {
-      last = std::stod(m[1].str());
-    } catch (const std::exception&) {
-    }
-  }
-  return last;
-}
-
 // Runs a peer on one sequence into `out`, evaluates its trajectory with our eval code and writes
 // out/stats.json in the shape `run` writes (frames, lost_frames, fps, stages_ms.frame, eval).
+// flat: the peer at nice 0 and, where its example honours NGD_NO_PACE (NGD-SLAM's, with the
+// measurement edit of scripts/speed_vs_ngd.sh), without the sleep to the recorded frame times.
 std::pair<int, nlohmann::json> run_peer(const Peer& peer, const std::filesystem::path& seq,
-                                        const std::filesystem::path& out) {
+                                        const std::filesystem::path& out, bool flat) {
   const auto traj = out / "trajectory.txt";
   std::filesystem::remove(traj);
   const auto t0 = std::chrono::steady_clock::now();
-  const int rc =
-      spawn_and_wait({"/bin/bash", peer.run_sh.string(), seq.string(), traj.string()}, out / "log.txt");
+  std::vector<std::string> env{"NICE=0"};
+  if (flat) env.emplace_back("NGD_NO_PACE=1");
+  const int rc = spawn_and_wait({"/bin/bash", peer.run_sh.string(), seq.string(), traj.string()},
+                                out / "log.txt", env);
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   nlohmann::json s = nlohmann::json::object();
   const auto frames = data_lines(seq / "rgb.txt").size();
@@ -410,13 +417,13 @@ std::pair<int, nlohmann::json> run_peer(const Peer& peer, const std::filesystem:
     std::ifstream in(f);
     log += std::string(std::istreambuf_iterator<char>(in), {}) + "\n";
   }
-  // run.sh prints the wall time of the SLAM binary alone (without its settings/association step).
-  const double slam_wall = number_after(log, std::regex(R"(wall=([0-9.]+)s)")).value_or(wall);
-  s["wall_s"] = slam_wall;
-  s["fps"] = slam_wall > 0 ? static_cast<double>(frames) / slam_wall : 0.0;
-  if (const auto t = number_after(log, std::regex(R"(median tracking time:\s*([0-9.eE+-]+))"))) {
-    s["stages_ms"]["frame"] = {{"median_ms", *t * 1000.0}};
-  }
+  const bench::PeerSpeed speed = bench::peer_speed(log, frames, wall);
+  s["wall_s"] = speed.wall_s;
+  s["fps"] = speed.fps;
+  s["fps_source"] = speed.frame_loop ? "frame loop and shutdown" : "whole binary (start-up included)";
+  // Only NGD-SLAM's edited example can skip the sleep to the recorded frame times.
+  s["paced"] = !(flat && speed.frame_loop && peer.name == "ngdslam");
+  if (speed.track_ms) s["stages_ms"]["frame"] = {{"median_ms", *speed.track_ms}};
   if (nonempty_file(traj)) {
     try {
       const auto est = io::read_tum_trajectory(traj);
@@ -591,7 +598,7 @@ void run_bench(const BenchArgs& args) {
         fs::create_directories(out);
         spdlog::info("bench [{}/{}]: {} [{}]{}", ++done, total, seq.name, name,
                      args.repeats > 1 ? fmt::format(" rep {}", rep) : std::string());
-        const auto [rc, stats] = run_peer(peer, input, out);
+        const auto [rc, stats] = run_peer(peer, input, out, args.peer_pace == "flat");
         record(seq, name, {}, rep, rc, stats, out);
       }
     }
@@ -657,9 +664,16 @@ void add_bench_command(CLI::App& app) {
          "--peers", args->peers,
          "Also run peer systems, comma-separated: orbslam2,ngdslam (../shared/tools/peer_*/run.sh, "
          "evaluated with our ATE code; shown as variants peer:NAME; FPS = frames / wall time of the "
-         "peer's binary, which plays back in real time). A peer that is not built is skipped with a warning")
+         "peer's frame loop and shutdown where its example prints it, else of its whole binary). A peer "
+         "that is not built is skipped with a warning")
       ->delimiter(',')
       ->check(CLI::IsMember({"orbslam2", "ngdslam"}));
+  cmd->add_option("--peer-pace", args->peer_pace,
+                  "flat: peers at nice 0 and, where the example allows it (NGD-SLAM with the measurement "
+                  "edit of scripts/speed_vs_ngd.sh), not paced to the recorded 30 Hz, like our runs; "
+                  "recorded: as their examples were written")
+      ->check(CLI::IsMember({"flat", "recorded"}))
+      ->capture_default_str();
   cmd->add_option("--ablation", args->ablation, "none|dynamic (Table V)|keyframes (culling x adaptive)|loop")
       ->capture_default_str();
   cmd->add_option("--detector-model", args->detector_model,

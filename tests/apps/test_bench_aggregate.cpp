@@ -201,5 +201,28 @@ TEST(BenchAggregate, JsonKeepsEmptyMetricsAsNull) {
   EXPECT_TRUE(j["fps_median"].is_null());
 }
 
+TEST(PeerSpeed, FrameLoopWallWinsOverTheWholeBinary) {
+  // run.sh's wall of the binary includes loading the vocabulary; the edited example's loop line does not.
+  const std::string log =
+      "[run] rgbd_tum rc=0 wall=18.0s\nloop wall: 15.5 s, with shutdown: 16.0 s\nmedian tracking time: 0.0205\n";
+  const PeerSpeed p = peer_speed(log, 400, 99.0);
+  EXPECT_TRUE(p.frame_loop);
+  EXPECT_DOUBLE_EQ(p.wall_s, 16.0);
+  EXPECT_DOUBLE_EQ(p.fps, 25.0);
+  ASSERT_TRUE(p.track_ms);
+  EXPECT_NEAR(*p.track_ms, 20.5, 1e-9);
+}
+
+TEST(PeerSpeed, WithoutTheEditTheBinaryWallThenTheCallersWall) {
+  const PeerSpeed binary = peer_speed("[run] rgbd_tum rc=0 wall=20.0s\n", 400, 99.0);
+  EXPECT_FALSE(binary.frame_loop);
+  EXPECT_DOUBLE_EQ(binary.fps, 20.0);
+  EXPECT_FALSE(binary.track_ms);
+  const PeerSpeed nothing = peer_speed("crashed\n", 400, 40.0);
+  EXPECT_DOUBLE_EQ(nothing.wall_s, 40.0);
+  EXPECT_DOUBLE_EQ(nothing.fps, 10.0);
+  EXPECT_DOUBLE_EQ(peer_speed("", 400, 0.0).fps, 0.0);
+}
+
 }  // namespace
 }  // namespace sp::app::bench
