@@ -86,7 +86,7 @@ nlohmann::json to_json(const SummaryRow& r);
 struct PeerSpeed {
   double wall_s = 0;
   double fps = 0;
-  bool frame_loop = false;  // wall_s is the frame loop's (comparable with ours)
+  bool frame_loop = false;         // wall_s is the frame loop's (comparable with ours)
   std::optional<double> track_ms;  // the example's "median tracking time", ms
 };
 PeerSpeed peer_speed(const std::string& log, std::size_t frames, double fallback_wall_s);

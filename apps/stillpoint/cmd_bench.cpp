@@ -404,8 +404,8 @@ std::pair<int, nlohmann::json> run_peer(const Peer& peer, const std::filesystem:
   const auto t0 = std::chrono::steady_clock::now();
   std::vector<std::string> env{"NICE=0"};
   if (flat) env.emplace_back("NGD_NO_PACE=1");
-  const int rc = spawn_and_wait({"/bin/bash", peer.run_sh.string(), seq.string(), traj.string()},
-                                out / "log.txt", env);
+  const int rc =
+      spawn_and_wait({"/bin/bash", peer.run_sh.string(), seq.string(), traj.string()}, out / "log.txt", env);
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   nlohmann::json s = nlohmann::json::object();
   const auto frames = data_lines(seq / "rgb.txt").size();

@@ -204,7 +204,8 @@ TEST(BenchAggregate, JsonKeepsEmptyMetricsAsNull) {
 TEST(PeerSpeed, FrameLoopWallWinsOverTheWholeBinary) {
   // run.sh's wall of the binary includes loading the vocabulary; the edited example's loop line does not.
   const std::string log =
-      "[run] rgbd_tum rc=0 wall=18.0s\nloop wall: 15.5 s, with shutdown: 16.0 s\nmedian tracking time: 0.0205\n";
+      "[run] rgbd_tum rc=0 wall=18.0s\nloop wall: 15.5 s, with shutdown: 16.0 s\nmedian tracking time: "
+      "0.0205\n";
   const PeerSpeed p = peer_speed(log, 400, 99.0);
   EXPECT_TRUE(p.frame_loop);
   EXPECT_DOUBLE_EQ(p.wall_s, 16.0);
