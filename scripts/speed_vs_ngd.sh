@@ -15,6 +15,7 @@
 # `make rgbd_tum` in its build folder: the usleep at the end of the frame loop runs only when
 # getenv("NGD_NO_PACE") is unset, and steady_clock stamps around the loop and SLAM.Shutdown() print
 # "loop wall: A s, with shutdown: B s". Without them the flat-out NGD runs are paced and print no wall.
+# scripts/ngd_measurement_edits.sh applies both and rebuilds (idempotent; run it after every peer setup.sh).
 # Run it on a quiet machine (nothing else busy); scripts/speed_vs_ngd_table.py OUT prints the table.
 set -euo pipefail
 root="$(cd "$(dirname "$0")/.." && pwd)"
