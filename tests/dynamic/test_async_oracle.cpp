@@ -124,6 +124,24 @@ TEST(AsyncDetector, WaitForFreshBoundsTheAgeOfTheDetectionUsed) {
   EXPECT_LT(bounded.stale_wait_ms, 150.0);
 }
 
+// The first frames: without wait_first they go on with no boxes while the first detection runs (the
+// map would start on the people in view); with it they wait for that detection.
+TEST(AsyncDetector, WaitForFreshWaitsForTheFirstDetectionOnlyWhenAsked) {
+  SlowFake fake{200ms};
+  AsyncDetector a(fake, AsyncDetector::Mode::kAsync);
+  a.submit(0, 0.0, frame(0));
+  const auto early = a.wait_for_fresh(1, 0ms, 4, 5s);
+  EXPECT_FALSE(early.detections.has_value()) << "frame 1 of 4 allowed: no wait, no boxes yet";
+  EXPECT_EQ(early.stale_wait_ms, 0.0);
+  const auto waited = a.wait_for_fresh(2, 0ms, 4, 5s, /*wait_first=*/true);
+  ASSERT_TRUE(waited.detections.has_value());
+  EXPECT_EQ(waited.detections->frame_index, 0u);
+  EXPECT_GT(waited.stale_wait_ms, 10.0) << "it had to wait for the worker";
+  // Once a detection exists, the first frames take it as fresh enough.
+  const auto after = a.wait_for_fresh(3, 0ms, 4, 5s, /*wait_first=*/true);
+  EXPECT_EQ(after.stale_wait_ms, 0.0);
+}
+
 TEST(AsyncDetector, StopMidRunFinishesCleanlyAndIgnoresLaterFrames) {
   SlowFake fake{100ms};
   auto a = std::make_unique<AsyncDetector>(fake, AsyncDetector::Mode::kAsync);

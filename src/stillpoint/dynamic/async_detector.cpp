@@ -77,14 +77,16 @@ std::optional<Detections> AsyncDetector::wait_for(std::size_t frame_index, std::
 }
 
 AsyncDetector::Fresh AsyncDetector::wait_for_fresh(std::size_t frame_index, std::chrono::milliseconds budget,
-                                                   std::size_t max_age,
-                                                   std::chrono::milliseconds stale_wait) {
+                                                   std::size_t max_age, std::chrono::milliseconds stale_wait,
+                                                   bool wait_first) {
   Fresh out;
   out.detections = wait_for(frame_index, budget);
-  if (max_age == 0 || frame_index <= max_age) return out;
+  if (max_age == 0) return out;
   if (out.detections && out.detections->frame_index + max_age >= frame_index) return out;
+  // In the first max_age frames only "no detection at all" is stale.
+  if (frame_index <= max_age && !wait_first) return out;
   const auto t0 = std::chrono::steady_clock::now();
-  out.detections = wait_for(frame_index - max_age, stale_wait);
+  out.detections = wait_for(frame_index > max_age ? frame_index - max_age : 0, stale_wait);
   out.stale_wait_ms =
       std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   return out;

@@ -48,12 +48,14 @@ class AsyncDetector {
   // wait_for(frame_index, budget); then, when the result is more than `max_age` frames older than
   // frame_index (or none exists), waits up to `stale_wait` more for one at most that old: boxes too
   // stale to carry by flow miss people who entered the view since. max_age 0: no second wait.
+  // `wait_first`: in the first max_age frames, when no detection has finished yet, wait up to
+  // `stale_wait` for the first one (false: those frames go on without boxes).
   struct Fresh {
     std::optional<Detections> detections;
     double stale_wait_ms = 0;  // time spent in the second wait
   };
   Fresh wait_for_fresh(std::size_t frame_index, std::chrono::milliseconds budget, std::size_t max_age,
-                       std::chrono::milliseconds stale_wait);
+                       std::chrono::milliseconds stale_wait, bool wait_first = false);
 
   // Finishes the frame in progress (cv::dnn cannot be interrupted), drops pending ones and joins.
   // Idempotent; the destructor calls it.

@@ -26,6 +26,7 @@ DynamicConfig DynamicConfig::from_yaml(const ConfigReader& r) {
   r.read("refill_reuse", c.refill_reuse);
   r.read("max_detection_age", c.max_detection_age, 0, 1000);
   r.read("stale_wait_ms", c.stale_wait_ms, 0.0, 10000.0);
+  r.read("wait_first_detection", c.wait_first_detection);
   r.read("deterministic_detector_latency", c.deterministic_detector_latency, 0, 100);
   if (r.has("detector")) {
     c.detector = dyn::DetectorConfig::from_yaml(r.section("detector"));
@@ -65,7 +66,8 @@ DynamicCulling::DynamicCulling(const DynamicConfig& config, const geo::CameraInt
       budget_ms_(config.detector_budget_ms),
       interval_(config.detector_interval),
       max_detection_age_(config.max_detection_age),
-      stale_wait_ms_(config.stale_wait_ms) {
+      stale_wait_ms_(config.stale_wait_ms),
+      wait_first_detection_(config.wait_first_detection) {
   K_ << camera.fx, 0, camera.cx, 0, camera.fy, camera.cy, 0, 0, 1;
   if (mode_ == "off") return;
   if (mode_ == "detector" || mode_ == "detector+flow") {
@@ -123,10 +125,10 @@ CullingOutput DynamicCulling::process(const io::FrameData& data, const cv::Mat& 
   }
   std::optional<dyn::Detections> detections;
   if (detector_) {
-    auto fresh =
-        detector_->wait_for_fresh(data.index, std::chrono::milliseconds(static_cast<int>(budget_ms_)),
-                                  static_cast<std::size_t>(max_detection_age_),
-                                  std::chrono::milliseconds(static_cast<int>(stale_wait_ms_)));
+    auto fresh = detector_->wait_for_fresh(
+        data.index, std::chrono::milliseconds(static_cast<int>(budget_ms_)),
+        static_cast<std::size_t>(max_detection_age_),
+        std::chrono::milliseconds(static_cast<int>(stale_wait_ms_)), wait_first_detection_);
     detections = std::move(fresh.detections);
     out.stale_wait_ms = fresh.stale_wait_ms;
   } else if (oracle_) {

@@ -59,6 +59,10 @@ struct DynamicConfig {
   // behind (a loaded CPU) makes detections this old. 0: never wait.
   int max_detection_age = 4;
   double stale_wait_ms = 200.0;
+  // The first frames wait (up to stale_wait_ms) for the detector's first boxes instead of starting
+  // the map with no culling: threaded, the first keyframe was made before any detection existed, its
+  // points on the people in view (deterministic runs see frame 0's boxes at once either way).
+  bool wait_first_detection = false;
   // --deterministic only: a detection is seen this many frames after its frame (0: at once, as a
   // synchronous detector). Reproduces, repeatably, the late boxes of a threaded run on a busy CPU
   // (there: 1 to max_detection_age + 2 frames), for tests and for diagnosing failures seen threaded.
@@ -109,6 +113,7 @@ class DynamicCulling {
   int interval_;
   int max_detection_age_;
   double stale_wait_ms_;
+  bool wait_first_detection_;
   Eigen::Matrix3d K_;
   std::filesystem::path model_file_;
   dyn::DetectorConfig detector_config_;
