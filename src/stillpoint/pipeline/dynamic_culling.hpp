@@ -61,7 +61,8 @@ struct DynamicConfig {
   double stale_wait_ms = 200.0;
   // The first frames wait (up to stale_wait_ms) for the detector's first boxes instead of starting
   // the map with no culling: threaded, the first keyframe was made before any detection existed, its
-  // points on the people in view (deterministic runs see frame 0's boxes at once either way).
+  // points on the people in view (deterministic runs see frame 0's boxes at once either way). Off:
+  // on fresh rooms 245-248 it made the walking sum worse (3.71 -> 3.78 cm, docs/dynamic.md).
   bool wait_first_detection = false;
   // --deterministic only: a detection is seen this many frames after its frame (0: at once, as a
   // synchronous detector). Reproduces, repeatably, the late boxes of a threaded run on a busy CPU
