@@ -282,6 +282,35 @@ TEST(MotionCheck, UnboxedMoverCullsNoDepthSeparatedBackground) {
   EXPECT_GE(keypoint_shares(p, separated, {}).dyn_patch, 0.7);  // the patch itself is still culled
 }
 
+// A far wall beyond the sensor's range has no depth, so its points are judged by their epipolar distance
+// under the camera motion fitted on the few near points; that motion can be a fraction of a degree off
+// in rotation (here: the fit failed and a prediction 0.12 deg off in pitch is used), which moves the
+// wall's points across their epipolar lines. With depthless_homography the wall's points follow the
+// homography most depthless points follow and are not movers; the walking patch does not follow it.
+TEST(MotionCheck, FarWallWithoutDepthIsNoMoverUnderASlightlyWrongMotion) {
+  Scene s;
+  s.with_board = false;
+  Pair p = make_pair(s, 0.0, {0.01, 0, 0}, {0.05, 0});
+  p.cur.depth.setTo(0.f);  // the wall and the patch: out of range
+  MotionCheckConfig cfg;
+  cfg.mode = CullMode::kFlowOnly;  // no boxes: the patch is an unboxed mover
+  cfg.max_moving_share = 1.0;      // judge every frame (the rejection rule is tested on its own)
+  DynamicInput in = input(p, true);
+  Eigen::Isometry3d tilt = Eigen::Isometry3d::Identity();
+  tilt.linear() = Eigen::AngleAxisd(0.12 * M_PI / 180, Eigen::Vector3d::UnitX()).toRotationMatrix();
+  in.T_cur_prev_predicted = (pose(0.0, {0.01, 0, 0}) * tilt).inverse();
+
+  cfg.depthless_homography = false;
+  const KpShares off = keypoint_shares(p, DynamicFeatureFilter(cfg).process(in), {});
+  EXPECT_GE(off.dyn_outside, 0.3);  // the wall is culled as a mover
+  EXPECT_GE(off.dyn_patch, 0.7);
+
+  cfg.depthless_homography = true;
+  const KpShares on = keypoint_shares(p, DynamicFeatureFilter(cfg).process(in), {});
+  EXPECT_LE(on.dyn_outside, 0.03);
+  EXPECT_GE(on.dyn_patch, 0.7);  // the walking patch is still culled
+}
+
 // n frames of a still camera, the patch (a walking person) moved sideways by step_m per frame.
 std::vector<Rendered> walking_patch_frames(const Scene& s, int n, double step_m) {
   std::vector<Rendered> frames;

@@ -45,6 +45,7 @@ MotionCheckConfig MotionCheckConfig::from_yaml(const ConfigReader& r) {
   r.read("ransac_confidence", c.ransac_confidence, 0.5, 0.9999);
   r.read_choice("ego_fit", c.ego_fit, {"ransac", "msac"});
   r.read("ego_fit_flat_points", c.ego_fit_flat_points);
+  r.read("depthless_homography", c.depthless_homography);
   r.read("ego_fit_threshold_px", c.ego_fit_threshold_px, 0.0, 50.0);
   r.read("ransac_iterations", c.ransac_iterations, 10, 10000);
   r.read("min_static_points", c.min_static_points, 8, 1000);

@@ -59,6 +59,12 @@ struct MotionCheckConfig {
   // (flat points: epsilon_epipolar_px) [0, 50]. The fit counts as failed (the prediction is kept) when
   // fewer than 30 % of the points with depth lie within it. 0.7 was best on the tune rooms.
   double ego_fit_threshold_px = 0.0;
+  // Points without depth (a far wall beyond the sensor's range) under the reprojection residual: a
+  // point is also static when it follows the homography that most of the other out-of-box points
+  // without depth follow (RANSAC, epsilon_epipolar_px). A motion fitted on a few near points can be a
+  // few tenths of a degree off in rotation, which moves far points by 1-2 px across their epipolar
+  // lines: "movers" all over a far wall with nobody there (docs/dynamic.md).
+  bool depthless_homography = false;
   int ransac_iterations = 200;  // PnP RANSAC iterations [10, 10000]
   int min_static_points = 15;   // fewer points outside boxes: ego-motion is fitted on all points [8, 1000]
   double moving_ratio_threshold = 0.3;  // share of moving points that makes a box dynamic [0, 1]
@@ -172,6 +178,10 @@ class DynamicFeatureFilter {
   // Epipolar distance to an F fitted by RANSAC, or the homography transfer error when a homography
   // explains the motion as well (static or rotating camera, far scene: F is degenerate there).
   void epipolar_residuals(const std::vector<int>& fit, DynamicResult& res, std::vector<float>& eps) const;
+  // depthless_homography: lowers the residual of each point without depth to its transfer error under
+  // the homography most out-of-box points without depth follow, when there is one.
+  void depthless_homography_residuals(const std::vector<int>& fit, const std::vector<bool>& has_z,
+                                      DynamicResult& res) const;
 
   MotionCheckConfig cfg_;
   std::vector<bool> always_dynamic_;  // class id -> always dynamic

@@ -299,8 +299,35 @@ bool DynamicFeatureFilter::reprojection_residuals(const DynamicInput& in, const 
       eps[i] = static_cast<float>(cfg_.epsilon_epipolar_px);
     }
   }
+  if (cfg_.depthless_homography) depthless_homography_residuals(fit, has_z, res);
   res.residual_used = "reprojection";
   return true;
+}
+
+void DynamicFeatureFilter::depthless_homography_residuals(const std::vector<int>& fit,
+                                                          const std::vector<bool>& has_z,
+                                                          DynamicResult& res) const {
+  const auto& cur = res.flow_points;
+  const auto& prev = res.flow_prev;
+  std::vector<cv::Point2f> p, c;
+  for (int i : fit) {
+    const auto k = static_cast<std::size_t>(i);
+    if (has_z[k]) continue;
+    p.push_back(prev[k]);
+    c.push_back(cur[k]);
+  }
+  if (static_cast<int>(p.size()) < std::max(8, cfg_.min_static_points)) return;
+  cv::Mat mask;
+  const cv::Mat H = cv::findHomography(p, c, cv::RANSAC, cfg_.epsilon_epipolar_px, mask,
+                                       cfg_.ransac_iterations * 10, cfg_.ransac_confidence);
+  // Only a homography most of them follow describes the far scene; else a person or mixed depths.
+  if (H.empty() || 2 * cv::countNonZero(mask) < static_cast<int>(p.size())) return;
+  const cv::Matx33d M(H);
+  for (std::size_t i = 0; i < cur.size(); ++i) {
+    if (has_z[i] || res.flow_residual[i] < 0.f) continue;
+    const float r = homography_transfer_error(M, prev[i], cur[i]);
+    if (r >= 0.f) res.flow_residual[i] = std::min(res.flow_residual[i], r);
+  }
 }
 
 void DynamicFeatureFilter::epipolar_residuals(const std::vector<int>& fit, DynamicResult& res,
