@@ -63,7 +63,8 @@ struct MotionCheckConfig {
   // point is also static when it follows the homography that most of the other out-of-box points
   // without depth follow (RANSAC, epsilon_epipolar_px). A motion fitted on a few near points can be a
   // few tenths of a degree off in rotation, which moves far points by 1-2 px across their epipolar
-  // lines: "movers" all over a far wall with nobody there (docs/dynamic.md).
+  // lines: "movers" all over a far wall with nobody there. Off: it fixed that room (0.385 -> 0.246 cm) but
+  // was not better across eight fresh rooms (walking 9.093 -> 9.163 cm; docs/dynamic.md).
   bool depthless_homography = false;
   int ransac_iterations = 200;  // PnP RANSAC iterations [10, 10000]
   int min_static_points = 15;   // fewer points outside boxes: ego-motion is fitted on all points [8, 1000]
