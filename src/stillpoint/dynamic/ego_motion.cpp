@@ -316,7 +316,7 @@ void DynamicFeatureFilter::depthless_homography_residuals(const std::vector<int>
     p.push_back(prev[k]);
     c.push_back(cur[k]);
   }
-  if (static_cast<int>(p.size()) < std::max(8, cfg_.min_static_points)) return;
+  if (static_cast<int>(p.size()) < cfg_.min_static_points) return;  // validated >= 8
   cv::Mat mask;
   const cv::Mat H = cv::findHomography(p, c, cv::RANSAC, cfg_.epsilon_epipolar_px, mask,
                                        cfg_.ransac_iterations * 10, cfg_.ransac_confidence);
