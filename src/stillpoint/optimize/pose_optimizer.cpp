@@ -21,7 +21,21 @@ struct Problem {
   double delta_mono, delta_stereo;
   double min_relative_decrease;
   bool robust;
+  const PosePrior* prior;
 };
+
+// The prior's residual log(T T_p^-1) and its Jacobian for the left increment, d r / d delta = Jl^-1(r).
+void add_prior(const PosePrior& prior, const geo::SE3& T, bool with_jacobian, NormalEquations& ne) {
+  const geo::Vec6 r = (T * prior.T_cw.inverse()).log();
+  geo::Vec6 w;
+  w.head<3>().setConstant(1.0 / (prior.sigma_translation_m * prior.sigma_translation_m));
+  w.tail<3>().setConstant(1.0 / (prior.sigma_rotation_rad * prior.sigma_rotation_rad));
+  ne.cost += r.dot(w.cwiseProduct(r));
+  if (!with_jacobian) return;
+  const geo::Mat6 J = geo::se3_left_jacobian_inv(r);
+  ne.H.noalias() += J.transpose() * w.asDiagonal() * J;
+  ne.g.noalias() += J.transpose() * w.cwiseProduct(r);
+}
 
 // Gauss-Newton normal equations of the (IRLS-weighted) robust cost at T over the inlier set.
 NormalEquations accumulate(const Problem& p, const geo::SE3& T, bool with_jacobian) {
@@ -45,6 +59,7 @@ NormalEquations accumulate(const Problem& p, const geo::SE3& T, bool with_jacobi
     ne.H.noalias() += w * rep.J_pose.transpose() * rep.J_pose;
     ne.g.noalias() += w * rep.J_pose.transpose() * rep.residual;
   }
+  if (p.prior != nullptr) add_prior(*p.prior, T, with_jacobian, ne);
   return ne;
 }
 
@@ -83,11 +98,17 @@ PoseOptimizerConfig PoseOptimizerConfig::from_yaml(const ConfigReader& r) {
   r.read("chi2_mono", c.chi2_mono, 0.1, 1000.0);
   r.read("chi2_stereo", c.chi2_stereo, 0.1, 1000.0);
   r.read("min_relative_decrease", c.min_relative_decrease, 0.0, 0.1);
+  r.read("motion_prior_m", c.motion_prior_m, 0.0, 1.0);
+  r.read("motion_prior_deg", c.motion_prior_deg, 0.0, 45.0);
+  r.read("motion_prior_max_matches", c.motion_prior_max_matches, 0, 100000);
+  if ((c.motion_prior_m > 0.0) != (c.motion_prior_deg > 0.0))
+    r.fail("motion_prior_m", "motion_prior_m and motion_prior_deg are both 0 (no prior) or both > 0");
   return c;
 }
 
 PoseOptimizationResult optimize_pose(geo::SE3& T_cw, const std::vector<PoseObservation>& observations,
-                                     const CameraModel& camera, const PoseOptimizerConfig& config) {
+                                     const CameraModel& camera, const PoseOptimizerConfig& config,
+                                     const PosePrior* prior) {
   PoseOptimizationResult result;
   const std::size_t n = observations.size();
   result.outlier.assign(n, false);
@@ -105,7 +126,8 @@ PoseOptimizationResult optimize_pose(geo::SE3& T_cw, const std::vector<PoseObser
             std::sqrt(config.chi2_mono),
             std::sqrt(config.chi2_stereo),
             config.min_relative_decrease,
-            true};
+            true,
+            prior};
   for (int round = 0; round < config.rounds; ++round) {
     // The robust kernel is dropped in the last round: by then the outliers are out.
     p.robust = round + 1 < config.rounds;

@@ -1,7 +1,8 @@
 #pragma once
 // Motion-only optimisation of one camera pose against fixed map points (ORB-SLAM's
 // PoseOptimization): a hand-written Levenberg-Marquardt on the 6-dof left increment of T_cw
-// (T_cw <- exp(delta) T_cw), robust Huber kernel, outliers re-classified by chi-square each round.
+// (T_cw <- exp(delta) T_cw), robust Huber kernel, outliers re-classified by chi-square each round;
+// optionally a weak Gaussian prior on the pose (the motion model's prediction).
 #include <Eigen/Core>
 #include <vector>
 
@@ -26,7 +27,24 @@ struct PoseOptimizerConfig {
   // A round stops once an accepted step lowers the cost by less than this share of it, [0, 0.1]:
   // 1e-5 against 1e-8 cut tracking's pose time ~10 % with the same ATE (docs/tracking_precision.md)
   double min_relative_decrease = 1e-5;
+  // Standard deviations of the motion prior (the constant-velocity prediction as a Gaussian prior on
+  // the pose); 0 for both: no prior. Weak next to a few dozen well-spread points, it only decides
+  // the directions the points leave unconstrained: a wall strip at one depth beside a person filling
+  // the view cannot tell a sideways step from a turn (docs/tracking_precision.md). [0, 1] m, [0, 45] deg
+  double motion_prior_m = 0.01;
+  double motion_prior_deg = 1.0;
+  // The prior only in solves with fewer matched map points than this (0: every solve): with many
+  // points spread over the view it is not needed, and a wrong prediction would only pull.
+  int motion_prior_max_matches = 100;
+  [[nodiscard]] bool has_motion_prior() const { return motion_prior_m > 0.0 && motion_prior_deg > 0.0; }
   static PoseOptimizerConfig from_yaml(const ConfigReader& r);
+};
+
+// A Gaussian prior on T_cw: residual log(T_cw * prior_T_cw^-1) = [rho; phi], weighted by 1/sigma.
+struct PosePrior {
+  geo::SE3 T_cw;
+  double sigma_translation_m = 0.01;
+  double sigma_rotation_rad = 0.01;
 };
 
 struct PoseOptimizationResult {
@@ -37,6 +55,7 @@ struct PoseOptimizationResult {
 // Refines T_cw in place. Needs at least 3 observations, otherwise T_cw is left unchanged and every
 // observation is reported as an outlier. Deterministic.
 PoseOptimizationResult optimize_pose(geo::SE3& T_cw, const std::vector<PoseObservation>& observations,
-                                     const CameraModel& camera, const PoseOptimizerConfig& config);
+                                     const CameraModel& camera, const PoseOptimizerConfig& config,
+                                     const PosePrior* prior = nullptr);
 
 }  // namespace sp::opt

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <numbers>
 #include <numeric>
 #include <unordered_set>
 
@@ -125,6 +126,7 @@ TrackOutcome Tracker::track_frame(Frame& frame, const MappingStatus& mapping) {
     const bool verifying = state_ == TrackingState::Ok && verify_left_ > 0 && last_frame_.has_pose;
     const geo::SE3 expected = predicted ? *predicted : last_frame_.T_cw;
     const bool motion_expected = velocity_.has_value();
+    motion_prior_ = config_.pose.has_motion_prior() ? predicted : std::nullopt;
     bool relocalized = false;
     why_lost_.clear();
     if (state_ == TrackingState::Ok) {
@@ -159,6 +161,7 @@ TrackOutcome Tracker::track_frame(Frame& frame, const MappingStatus& mapping) {
       }
     }
     const bool jumped = ok && predicted && guard_pose(frame, *predicted);
+    motion_prior_.reset();
     // Guarded: the arguments (frame.matched() counts every feature) are not worth evaluating per frame.
     if (spdlog::should_log(spdlog::level::trace)) {
       spdlog::trace(
@@ -381,7 +384,14 @@ int Tracker::optimize_pose(Frame& frame) {
       feature_of.resize(kept);
     }
   }
-  const auto result = opt::optimize_pose(frame.T_cw, obs, camera_model_, config_.pose);
+  std::optional<opt::PosePrior> prior;
+  const int max_matches = config_.pose.motion_prior_max_matches;
+  if (motion_prior_ && (max_matches == 0 || static_cast<int>(obs.size()) < max_matches)) {
+    prior = opt::PosePrior{*motion_prior_, config_.pose.motion_prior_m,
+                           config_.pose.motion_prior_deg * std::numbers::pi / 180.0};
+  }
+  const auto result =
+      opt::optimize_pose(frame.T_cw, obs, camera_model_, config_.pose, prior ? &*prior : nullptr);
   int inliers = 0;
   for (std::size_t k = 0; k < obs.size(); ++k) {
     frame.outlier[feature_of[k]] = result.outlier[k];
