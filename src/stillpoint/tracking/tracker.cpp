@@ -126,7 +126,7 @@ TrackOutcome Tracker::track_frame(Frame& frame, const MappingStatus& mapping) {
     const bool verifying = state_ == TrackingState::Ok && verify_left_ > 0 && last_frame_.has_pose;
     const geo::SE3 expected = predicted ? *predicted : last_frame_.T_cw;
     const bool motion_expected = velocity_.has_value();
-    motion_prior_ = config_.pose.has_motion_prior() ? predicted : std::nullopt;
+    motion_prior_ = predicted;
     bool relocalized = false;
     why_lost_.clear();
     if (state_ == TrackingState::Ok) {
@@ -384,9 +384,11 @@ int Tracker::optimize_pose(Frame& frame) {
       feature_of.resize(kept);
     }
   }
+  // The whole rule of when the prediction enters the solve (PoseOptimizerConfig::motion_prior_*).
   std::optional<opt::PosePrior> prior;
   const int max_matches = config_.pose.motion_prior_max_matches;
-  if (motion_prior_ && (max_matches == 0 || static_cast<int>(obs.size()) < max_matches)) {
+  if (motion_prior_ && config_.pose.has_motion_prior() &&
+      (max_matches == 0 || static_cast<int>(obs.size()) < max_matches)) {
     prior = opt::PosePrior{*motion_prior_, config_.pose.motion_prior_m,
                            config_.pose.motion_prior_deg * std::numbers::pi / 180.0};
   }

@@ -231,8 +231,8 @@ class Tracker {
   TrackingState state_ = TrackingState::NotInitialized;
   Frame last_frame_;
   std::optional<geo::SE3> velocity_;  // T_cur_last of the last tracked step
-  // This frame's constant-velocity prediction while it is tracked: the pose solves' motion prior
-  // (PoseOptimizerConfig::motion_prior_m); none while lost or right after a jump.
+  // This frame's constant-velocity prediction while it is tracked, for the pose solves' motion prior
+  // (used or not by optimize_pose); none while lost or right after a jump.
   std::optional<geo::SE3> motion_prior_;
   map::KeyframeId reference_ = map::kNoKeyframe;
   std::size_t last_keyframe_frame_ = 0;
