@@ -501,6 +501,51 @@ TEST(MotionCheck, StillPersonIsDynamicUntilProvenStatic) {
   }
 }
 
+// A person standing still and not yet proven static (culled as a person) and a chair (a static
+// class, kept), both detected on frames 1-2 and missed from frame 3 on. With coast_culled the
+// person's box, culled in the frame before, is carried for coast_frames frames after its last
+// detection and stays dynamic; the chair, never culled, is not. Coasting only tracks seen moving
+// (coast_culled off) leaves the still person unboxed from the first miss.
+TEST(MotionCheck, MissedDetectionOfAnUnprovenPersonIsCoastedWhenCulledBoxesCoast) {
+  const Scene s;
+  const Rendered f = test::render(s.planes({0, 0}), Eigen::Isometry3d::Identity());
+  const auto kps = test::grid_keypoints(640, 480, 8);
+  const cv::Rect2f person = test::label_box(f.label, 1), chair = test::label_box(f.label, 2);
+  for (bool coast_culled : {false, true}) {
+    SCOPED_TRACE(coast_culled);
+    MotionCheckConfig cfg;
+    cfg.coast_frames = 3;
+    cfg.coast_culled = coast_culled;
+    cfg.static_proof_frames = 8;  // still unproven over the whole run
+    DynamicFeatureFilter filter(cfg);
+    for (std::size_t i = 1; i <= 6; ++i) {
+      Detections det;
+      det.frame_index = i;
+      if (i <= 2) det.items = {{person, 0, 0.9f}, {chair, 56, 0.9f}};
+      const DynamicResult r = filter.process(still_input(f, i, &kps, &det));
+      std::size_t person_boxes = 0, chair_boxes = 0;
+      for (std::size_t b = 0; b < r.boxes.size(); ++b) {
+        if (r.boxes[b].class_id == 56) {
+          ++chair_boxes;
+          continue;
+        }
+        ++person_boxes;
+        EXPECT_TRUE(r.box_dynamic[b]) << "frame " << i;
+        EXPECT_GT(iou(r.boxes[b].box, person), 0.9f) << "frame " << i;  // nobody moves
+      }
+      const bool coasting = coast_culled && i >= 3 && i <= 5;  // up to 3 frames after frame 2
+      EXPECT_EQ(person_boxes, i <= 2 || coasting ? 1u : 0u) << "frame " << i;
+      EXPECT_EQ(chair_boxes, i <= 2 ? 1u : 0u) << "frame " << i;
+      if (coasting) {
+        int culled_in_person = 0;
+        for (std::size_t k = 0; k < kps.size(); ++k)
+          culled_in_person += r.keypoint_dynamic[k] && person.contains(kps[k].pt) ? 1 : 0;
+        EXPECT_GT(culled_in_person, 50) << "frame " << i;
+      }
+    }
+  }
+}
+
 // A person proven still is culled anyway while the rest of the image has enough keypoints; with only
 // a few keypoints outside the person, its features are used (and marked suspect).
 TEST(MotionCheck, ProvenStillPeopleAreCulledUnlessTheRestIsTooPoor) {

@@ -67,6 +67,7 @@ MotionCheckConfig MotionCheckConfig::from_yaml(const ConfigReader& r) {
   r.read("box_margin_px", c.box_margin_px, 0.0, 100.0);
   r.read("max_history_frames", c.max_history_frames, 1, 100);
   r.read("coast_frames", c.coast_frames, 0, 100);
+  r.read("coast_culled", c.coast_culled);
   return c;
 }
 

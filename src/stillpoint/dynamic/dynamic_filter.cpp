@@ -203,9 +203,15 @@ std::vector<Detection> DynamicFeatureFilter::coast_boxes(const std::vector<Detec
   if (cfg_.coast_frames <= 0 || history_.empty() || history_.back().frame_index != frame) return out;
   const FlowStep& step = history_.back();
   for (const BoxTrack& t : tracks_) {
-    // Followed up to the previous frame, moved lately, detected recently enough.
-    if (t.last_seen_frame + 1 != frame || !t.last_dynamic_frame) continue;
-    if (frame - *t.last_dynamic_frame > static_cast<std::size_t>(cfg_.dynamic_hold_frames)) continue;
+    // Followed up to the previous frame, eligible (moved lately; with coast_culled: culled in the frame
+    // before), detected recently enough.
+    if (t.last_seen_frame + 1 != frame) continue;
+    if (cfg_.coast_culled) {
+      if (t.last_culled_frame != t.last_seen_frame) continue;
+    } else {
+      if (!t.last_dynamic_frame) continue;
+      if (frame - *t.last_dynamic_frame > static_cast<std::size_t>(cfg_.dynamic_hold_frames)) continue;
+    }
     if (frame - t.last_detected_frame > static_cast<std::size_t>(cfg_.coast_frames)) continue;
     Detection det;
     det.box = t.box;
@@ -438,6 +444,7 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
       still_person[b] = !dyn && always && cfg_.static_proof_frames > 0;
     }
     res.box_dynamic[b] = dyn || still_person[b];
+    if (res.box_dynamic[b]) track.last_culled_frame = in.frame_index;
   }
   std::erase_if(tracks_, [&](const BoxTrack& t) {
     return in.frame_index > t.last_seen_frame + static_cast<std::size_t>(std::max(cfg_.dynamic_hold_frames,

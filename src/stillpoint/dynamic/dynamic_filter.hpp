@@ -107,6 +107,10 @@ struct MotionCheckConfig {
   // flow of its points for up to this many frames after its last detection: one missed detection no
   // longer uncovers a walking person for a whole detector interval (docs/dynamic.md) [0, 100]; 0 = off.
   int coast_frames = 0;
+  // Which tracks coast: false = only those the motion check saw move within dynamic_hold_frames;
+  // true = any whose box was culled in the frame before (a person still unproven static included:
+  // a missed detection of someone at the image border does not uncover them either).
+  bool coast_culled = false;
 
   static MotionCheckConfig from_yaml(const ConfigReader& r);
 };
@@ -166,6 +170,7 @@ class DynamicFeatureFilter {
     std::size_t last_seen_frame = 0;
     std::size_t last_detected_frame = 0;            // last frame a detection (not coasting) placed it
     std::optional<std::size_t> last_dynamic_frame;  // last frame the motion check saw it move
+    std::optional<std::size_t> last_culled_frame;   // last frame its box was culled (for any reason)
     int static_streak = 0;                          // consecutive frames the motion check saw it still
   };
 
