@@ -447,6 +447,58 @@ TEST(MotionCheck, MissedDetectionOfAMovingPersonIsCoasted) {
   }
 }
 
+// A walking person (the patch at 2 m before the wall at 3 m) whose box leaves out its top third, as a
+// late detection's box can leave out the head of someone close: with object_band_share the keypoints
+// just outside the box at the person's depth are culled, the wall's keypoints in the same band are not;
+// without it the person's top third is kept (unboxed movers are not culled here, to test the band alone).
+TEST(MotionCheck, KeypointsJustOutsideADynamicBoxAtTheObjectsDepthAreTheObject) {
+  const auto kps = test::grid_keypoints(640, 480, 8);
+  const std::vector<Rendered> frames = walking_patch_frames(Scene{}, 3, 0.06);
+  for (double share : {0.0, 0.5}) {
+    SCOPED_TRACE(share);
+    MotionCheckConfig cfg;
+    cfg.cull_unboxed_movers = false;
+    cfg.object_band_share = share;
+    DynamicFeatureFilter f(cfg);
+    DynamicResult r;
+    cv::Rect2f truth;
+    for (std::size_t i = 1; i < frames.size(); ++i) {
+      truth = test::label_box(frames[i].label, 2);
+      cv::Rect2f cut = truth;
+      cut.y += truth.height / 3;
+      cut.height -= truth.height / 3;
+      Detections det;
+      det.frame_index = i;
+      det.items = {{cut, 0, 0.9f}};
+      r = f.process(sequence_input(frames, i, &kps, &det, true));
+    }
+    ASSERT_EQ(r.boxes.size(), 1u);
+    ASSERT_TRUE(r.box_dynamic[0]);
+    const cv::Rect2f& box = r.boxes[0].box;
+    const float band = static_cast<float>(share) * std::max(box.width, box.height);
+    // The person above the box (clear of its 4 px margin and of the patch's edges).
+    const cv::Rect2f top(truth.x + 6, truth.y + 2, truth.width - 12, box.y - 8 - (truth.y + 2));
+    const cv::Rect2f person_grown(truth.x - 6, truth.y - 6, truth.width + 12, truth.height + 12);
+    const cv::Rect2f band_outer(box.x - band + 2, box.y - band + 2, box.width + 2 * band - 4,
+                                box.height + 2 * band - 4);
+    int person_top = 0, person_top_culled = 0, wall_in_band = 0, wall_in_band_culled = 0;
+    for (std::size_t k = 0; k < kps.size(); ++k) {
+      const cv::Point2f& p = kps[k].pt;
+      if (top.contains(p)) {
+        ++person_top;
+        person_top_culled += r.keypoint_dynamic[k] ? 1 : 0;
+      } else if (!person_grown.contains(p) && band_outer.contains(p)) {
+        ++wall_in_band;
+        wall_in_band_culled += r.keypoint_dynamic[k] ? 1 : 0;
+      }
+    }
+    EXPECT_GT(person_top, 20);
+    EXPECT_EQ(person_top_culled, share > 0 ? person_top : 0);
+    if (share > 0) EXPECT_GT(wall_in_band, 50);
+    EXPECT_EQ(wall_in_band_culled, 0);
+  }
+}
+
 // Frame i of a static camera watching a still scene: the same image as previous and current frame.
 DynamicInput still_input(const Rendered& f, std::size_t i, const std::vector<cv::KeyPoint>* kps,
                          const Detections* det) {

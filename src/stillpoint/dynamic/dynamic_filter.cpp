@@ -483,9 +483,19 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
       bool dyn = false;
       bool near_object = false;
       for (std::size_t b = 0; b < res.boxes.size() && !dyn; ++b) {
-        if (!inside(grow(res.boxes[b].box, 2.f * margin), p)) continue;
+        const cv::Rect2f& box = res.boxes[b].box;
+        const float band = static_cast<float>(cfg_.object_band_share) * std::max(box.width, box.height);
+        if (band > margin && res.box_dynamic[b] && object_depth[b] > 0.f && inside(grow(box, band), p) &&
+            !inside(grow(box, margin), p)) {
+          const float z = raw_depth(in.depth, p);
+          if (z > 0.f && std::abs(z - object_depth[b]) <= bg_margin) {
+            dyn = near_object = true;
+            continue;
+          }
+        }
+        if (!inside(grow(box, 2.f * margin), p)) continue;
         near_object = true;
-        if (!res.box_dynamic[b] || !inside(grow(res.boxes[b].box, margin), p)) continue;
+        if (!res.box_dynamic[b] || !inside(grow(box, margin), p)) continue;
         dyn = true;
         // Depth-separated points in the box (background behind, furniture in front) are kept.
         if (cfg_.keep_background_in_box && object_depth[b] > 0.f) {

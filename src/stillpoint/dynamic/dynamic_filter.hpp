@@ -87,7 +87,11 @@ struct MotionCheckConfig {
   // (background behind it, furniture in front of it) are kept.
   bool keep_background_in_box = true;
   double background_depth_margin_m = 0.4;  // metres [0.05, 10]
-  bool cull_unboxed_movers = true;         // moving point clusters outside boxes are culled too
+  // A keypoint just outside a dynamic box (within this share of the box's larger side) at the object's
+  // depth (within background_depth_margin_m) is the object too: a box carried from a late detection
+  // lags a close person and leaves the head or an arm out (docs/dynamic.md). 0 = off [0, 1].
+  double object_band_share = 0.0;
+  bool cull_unboxed_movers = true;  // moving point clusters outside boxes are culled too
   // A keypoint is not culled for a nearby mover whose depth differs from its own by more than
   // background_depth_margin_m: background seen beside a close person is not the person. Off: measured
   // only together with a 1 px reprojection threshold, which did not generalise (docs/dynamic.md).
