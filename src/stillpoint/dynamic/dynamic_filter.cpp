@@ -205,13 +205,11 @@ std::vector<Detection> DynamicFeatureFilter::coast_boxes(const std::vector<Detec
   for (const BoxTrack& t : tracks_) {
     // Followed up to the previous frame, eligible (moved lately; with coast_culled: culled in the frame
     // before), detected recently enough.
-    if (t.last_seen_frame + 1 != frame) continue;
-    if (cfg_.coast_culled) {
-      if (t.last_culled_frame != t.last_seen_frame) continue;
-    } else {
-      if (!t.last_dynamic_frame) continue;
-      if (frame - *t.last_dynamic_frame > static_cast<std::size_t>(cfg_.dynamic_hold_frames)) continue;
-    }
+    const bool eligible =
+        cfg_.coast_culled ? t.last_culled_frame == t.last_seen_frame
+                          : t.last_dynamic_frame && frame - *t.last_dynamic_frame <=
+                                                        static_cast<std::size_t>(cfg_.dynamic_hold_frames);
+    if (t.last_seen_frame + 1 != frame || !eligible) continue;
     if (frame - t.last_detected_frame > static_cast<std::size_t>(cfg_.coast_frames)) continue;
     Detection det;
     det.box = t.box;
@@ -476,6 +474,20 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
     });
     return nearest;
   };
+  // Whether keypoint p lies at box b's object depth (within the margin); none without both depths.
+  const auto at_object_depth = [&](std::size_t b, const cv::Point2f& p) -> std::optional<bool> {
+    if (object_depth[b] <= 0.f) return std::nullopt;
+    const float z = raw_depth(in.depth, p);
+    if (z <= 0.f) return std::nullopt;
+    return std::abs(z - object_depth[b]) <= bg_margin;
+  };
+  // Per box, the band around it where keypoints at the object's depth are the object (0: none).
+  std::vector<float> band(res.boxes.size(), 0.f);
+  if (cfg_.object_band_share > 0.0) {
+    for (std::size_t b = 0; b < res.boxes.size(); ++b)
+      band[b] = static_cast<float>(cfg_.object_band_share) *
+                std::max(res.boxes[b].box.width, res.boxes[b].box.height);
+  }
   const auto classify = [&] {
     res.culled = 0;
     for (std::size_t k = 0; k < n_kp; ++k) {
@@ -484,25 +496,17 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
       bool near_object = false;
       for (std::size_t b = 0; b < res.boxes.size() && !dyn; ++b) {
         const cv::Rect2f& box = res.boxes[b].box;
-        const float band = static_cast<float>(cfg_.object_band_share) * std::max(box.width, box.height);
-        if (band > margin && res.box_dynamic[b] && object_depth[b] > 0.f && inside(grow(box, band), p) &&
-            !inside(grow(box, margin), p)) {
-          const float z = raw_depth(in.depth, p);
-          if (z > 0.f && std::abs(z - object_depth[b]) <= bg_margin) {
-            dyn = near_object = true;
-            continue;
-          }
+        if (band[b] > margin && res.box_dynamic[b] && inside(grow(box, band[b]), p) &&
+            !inside(grow(box, margin), p) && at_object_depth(b, p).value_or(false)) {
+          dyn = near_object = true;
+          continue;
         }
         if (!inside(grow(box, 2.f * margin), p)) continue;
         near_object = true;
         if (!res.box_dynamic[b] || !inside(grow(box, margin), p)) continue;
-        dyn = true;
-        // Depth-separated points in the box (background behind, furniture in front) are kept.
-        if (cfg_.keep_background_in_box && object_depth[b] > 0.f) {
-          const float z = raw_depth(in.depth, p);
-          // No depth (edges, projector shadow): culled, missing a mover costs more than a lost point.
-          if (z > 0.f) dyn = std::abs(z - object_depth[b]) <= bg_margin;
-        }
+        // Depth-separated points in the box (background behind, furniture in front) are kept. No depth
+        // (edges, projector shadow): culled, missing a mover costs more than a lost point.
+        dyn = !cfg_.keep_background_in_box || at_object_depth(b, p).value_or(true);
       }
       if (!dyn && (cull_movers || flow_judges)) {
         const int j = nearest_flow(p);
