@@ -499,6 +499,59 @@ TEST(MotionCheck, KeypointsJustOutsideADynamicBoxAtTheObjectsDepthAreTheObject) 
   }
 }
 
+// A walking person (a tall patch at 2 m, cut off by the image's top edge) whose detected box stops 20 px
+// short of that edge, as a detector's box does for someone cut off by the image: with border_snap_px 24
+// the box's top edge moves onto the image's and the person's keypoints above the detected box are culled;
+// the box's other edges, far from the image's, stay. Without it those keypoints are kept (unboxed movers
+// are not culled here, to test the snap alone).
+TEST(MotionCheck, BoxEdgeNearTheImageEdgeIsSnappedOntoIt) {
+  const auto kps = test::grid_keypoints(640, 480, 8);
+  const Scene s;
+  std::vector<Rendered> frames;
+  for (double x : {0.0, 0.06, 0.12}) {
+    const std::vector<Plane> planes = {{3.0, cv::Rect2d(), 200, &s.wall_tex, 0},
+                                       {2.0, cv::Rect2d(0.1 + x, -1.2, 0.4, 1.0), 300, &s.patch_tex, 2}};
+    frames.push_back(test::render(planes, Eigen::Isometry3d::Identity()));
+  }
+  for (double snap : {0.0, 24.0}) {
+    SCOPED_TRACE(snap);
+    MotionCheckConfig cfg;
+    cfg.cull_unboxed_movers = false;
+    cfg.border_snap_px = snap;
+    DynamicFeatureFilter f(cfg);
+    DynamicResult r;
+    cv::Rect2f truth, cut;
+    for (std::size_t i = 1; i < frames.size(); ++i) {
+      truth = test::label_box(frames[i].label, 2);
+      ASSERT_EQ(truth.y, 0.f);  // cut off by the image's top edge
+      cut = truth;
+      cut.y += 20;
+      cut.height -= 20;
+      Detections det;
+      det.frame_index = i;
+      det.items = {{cut, 0, 0.9f}};
+      r = f.process(sequence_input(frames, i, &kps, &det, true));
+    }
+    ASSERT_EQ(r.boxes.size(), 1u);
+    ASSERT_TRUE(r.box_dynamic[0]);
+    const cv::Rect2f& box = r.boxes[0].box;
+    EXPECT_EQ(box.y, snap > 0 ? 0.f : cut.y);
+    EXPECT_EQ(box.x, cut.x);
+    EXPECT_EQ(box.x + box.width, cut.x + cut.width);
+    EXPECT_EQ(box.y + box.height, cut.y + cut.height);
+    // The person above the detected box (clear of its 4 px margin and of the patch's sides).
+    const cv::Rect2f top(truth.x + 6, 0, truth.width - 12, cut.y - 5);
+    int person_top = 0, person_top_culled = 0;
+    for (std::size_t k = 0; k < kps.size(); ++k) {
+      if (!top.contains(kps[k].pt)) continue;
+      ++person_top;
+      person_top_culled += r.keypoint_dynamic[k] ? 1 : 0;
+    }
+    EXPECT_GT(person_top, 10);
+    EXPECT_EQ(person_top_culled, snap > 0 ? person_top : 0);
+  }
+}
+
 // Frame i of a static camera watching a still scene: the same image as previous and current frame.
 DynamicInput still_input(const Rendered& f, std::size_t i, const std::vector<cv::KeyPoint>* kps,
                          const Detections* det) {

@@ -66,6 +66,7 @@ MotionCheckConfig MotionCheckConfig::from_yaml(const ConfigReader& r) {
   r.read("cluster_radius_px", c.cluster_radius_px, 1.0, 500.0);
   r.read("cluster_min_points", c.cluster_min_points, 1, 100);
   r.read("box_margin_px", c.box_margin_px, 0.0, 100.0);
+  r.read("border_snap_px", c.border_snap_px, 0.0, 200.0);
   r.read("max_history_frames", c.max_history_frames, 1, 100);
   r.read("coast_frames", c.coast_frames, 0, 100);
   r.read("coast_culled", c.coast_culled);

@@ -186,6 +186,17 @@ bool carry_box(cv::Rect2f& box, const std::vector<cv::Point2f>& prev, const std:
   return true;
 }
 
+// Moves each edge of the box that lies within `snap` px of the image's edge onto it.
+void snap_to_border(cv::Rect2f& box, const cv::Size& image, float snap) {
+  const auto w = static_cast<float>(image.width), h = static_cast<float>(image.height);
+  float x0 = box.x, y0 = box.y, x1 = box.x + box.width, y1 = box.y + box.height;
+  if (x0 < snap) x0 = 0.f;
+  if (y0 < snap) y0 = 0.f;
+  if (x1 > w - snap) x1 = w;
+  if (y1 > h - snap) y1 = h;
+  box = cv::Rect2f(x0, y0, x1 - x0, y1 - y0);
+}
+
 }  // namespace
 
 std::vector<Detection> DynamicFeatureFilter::carry_boxes(const Detections& d, std::size_t to_frame) const {
@@ -308,6 +319,10 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
   if (use_boxes && do_flow) {
     const std::vector<Detection> coasted = coast_boxes(res.boxes, in.frame_index);
     res.boxes.insert(res.boxes.end(), coasted.begin(), coasted.end());
+  }
+  if (cfg_.border_snap_px > 0.0) {
+    for (Detection& d : res.boxes)
+      snap_to_border(d.box, gray.size(), static_cast<float>(cfg_.border_snap_px));
   }
   const auto margin = static_cast<float>(cfg_.box_margin_px);
   const std::size_t n = cur.size();

@@ -106,7 +106,11 @@ struct MotionCheckConfig {
   double cluster_radius_px = 60.0;  // a mover is confirmed with >= cluster_min_points movers this near
   int cluster_min_points = 3;       // [1, 100] (counting itself)
   double box_margin_px = 4.0;       // boxes are grown by this for keypoint tests [0, 100]
-  int max_history_frames = 10;      // flow history for carrying late detections forward [1, 100]
+  // A box edge this close to the image's edge is moved onto it: a detector's box for a person cut off
+  // by the image edge stops short of it and leaves the head or feet out (docs/dynamic.md) [0, 200];
+  // 0 = off.
+  double border_snap_px = 0.0;
+  int max_history_frames = 10;  // flow history for carrying late detections forward [1, 100]
   // A box that moved within dynamic_hold_frames and that the newest detection misses is carried by the
   // flow of its points for up to this many frames after its last detection: one missed detection no
   // longer uncovers a walking person for a whole detector interval (docs/dynamic.md) [0, 100]; 0 = off.
