@@ -153,8 +153,13 @@ TrackOutcome Tracker::track_frame(Frame& frame, const MappingStatus& mapping) {
         if (--verify_left_ == 0) accept_relocalization();
       } else {
         ++reloc_stats_.rejected_by_consistency;
-        spdlog::info("relocalisation at frame {} rejected: frame {} did not track consistently from it",
-                     reloc_frame_, frame.index);
+        const PoseDeviation d = pose_deviation(frame.T_cw, expected);
+        spdlog::info(
+            "relocalisation at frame {} rejected: frame {} did not track consistently from it ({}, {} "
+            "inliers, {:.1f} cm / {:.2f} deg from the {})",
+            reloc_frame_, frame.index,
+            ok ? (by_motion || !motion_expected ? "tracked" : "tracked by reference") : "not tracked",
+            frame.matched(), 100.0 * d.translation_m, d.rotation_deg, predicted ? "prediction" : "last pose");
         verify_left_ = 0;
         unverified_.clear();  // already counted as lost
         ok = false;
