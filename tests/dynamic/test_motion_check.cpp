@@ -447,55 +447,102 @@ TEST(MotionCheck, MissedDetectionOfAMovingPersonIsCoasted) {
   }
 }
 
+// Feeds frames 1.. to a filter with cfg, each detected with a box that leaves out the patch's top third
+// (as a late detection's box can leave out the head of someone close); the last result and the
+// patch's true box in the last frame.
+DynamicResult run_with_top_third_unboxed(const std::vector<Rendered>& frames,
+                                         const std::vector<cv::KeyPoint>& kps, const MotionCheckConfig& cfg,
+                                         cv::Rect2f& truth) {
+  DynamicFeatureFilter f(cfg);
+  DynamicResult r;
+  for (std::size_t i = 1; i < frames.size(); ++i) {
+    truth = test::label_box(frames[i].label, 2);
+    cv::Rect2f cut = truth;
+    cut.y += truth.height / 3;
+    cut.height -= truth.height / 3;
+    Detections det;
+    det.frame_index = i;
+    det.items = {{cut, 0, 0.9f}};
+    r = f.process(sequence_input(frames, i, &kps, &det, true));
+  }
+  return r;
+}
+
+// Keypoints of the person above its box and of the wall in the band around the box (clear of the box's
+// 2 x 4 px suspect margin and of the patch's edges): how many, how many culled, how many suspect.
+struct BandCounts {
+  int person_top = 0, person_top_culled = 0, person_top_suspect = 0;
+  int wall = 0, wall_culled = 0, wall_suspect = 0;
+};
+BandCounts count_band(const DynamicResult& r, const std::vector<cv::KeyPoint>& kps, const cv::Rect2f& truth,
+                      double share) {
+  const cv::Rect2f& box = r.boxes.at(0).box;
+  const float band = static_cast<float>(share) * std::max(box.width, box.height);
+  const cv::Rect2f top(truth.x + 6, truth.y + 2, truth.width - 12, box.y - 12 - (truth.y + 2));
+  const cv::Rect2f person_grown(truth.x - 6, truth.y - 6, truth.width + 12, truth.height + 12);
+  const cv::Rect2f box_grown(box.x - 10, box.y - 10, box.width + 20, box.height + 20);
+  const cv::Rect2f band_outer(box.x - band + 2, box.y - band + 2, box.width + 2 * band - 4,
+                              box.height + 2 * band - 4);
+  BandCounts c;
+  for (std::size_t k = 0; k < kps.size(); ++k) {
+    const cv::Point2f& p = kps[k].pt;
+    if (top.contains(p)) {
+      ++c.person_top;
+      c.person_top_culled += r.keypoint_dynamic[k] ? 1 : 0;
+      c.person_top_suspect += r.keypoint_suspect[k] ? 1 : 0;
+    } else if (!person_grown.contains(p) && !box_grown.contains(p) && band_outer.contains(p)) {
+      ++c.wall;
+      c.wall_culled += r.keypoint_dynamic[k] ? 1 : 0;
+      c.wall_suspect += r.keypoint_suspect[k] ? 1 : 0;
+    }
+  }
+  return c;
+}
+
+// The band counts after frames of the patch moving `step_m` per frame, with the band switch `band`
+// (object_band_share or suspect_band_share) at `share`; unboxed movers are not culled, to test the band
+// alone. The box must come out dynamic.
+BandCounts band_counts(double step_m, double MotionCheckConfig::*band, double share) {
+  const auto kps = test::grid_keypoints(640, 480, 8);
+  const std::vector<Rendered> frames = walking_patch_frames(Scene{}, 3, step_m);
+  MotionCheckConfig cfg;
+  cfg.cull_unboxed_movers = false;
+  cfg.*band = share;
+  cv::Rect2f truth;
+  const DynamicResult r = run_with_top_third_unboxed(frames, kps, cfg, truth);
+  EXPECT_EQ(r.boxes.size(), 1u);
+  EXPECT_TRUE(!r.box_dynamic.empty() && r.box_dynamic[0]);
+  return r.boxes.size() == 1 ? count_band(r, kps, truth, share) : BandCounts{};
+}
+
 // A walking person (the patch at 2 m before the wall at 3 m) whose box leaves out its top third, as a
 // late detection's box can leave out the head of someone close: with object_band_share the keypoints
 // just outside the box at the person's depth are culled, the wall's keypoints in the same band are not;
-// without it the person's top third is kept (unboxed movers are not culled here, to test the band alone).
+// without it the person's top third is kept.
 TEST(MotionCheck, KeypointsJustOutsideADynamicBoxAtTheObjectsDepthAreTheObject) {
-  const auto kps = test::grid_keypoints(640, 480, 8);
-  const std::vector<Rendered> frames = walking_patch_frames(Scene{}, 3, 0.06);
   for (double share : {0.0, 0.5}) {
     SCOPED_TRACE(share);
-    MotionCheckConfig cfg;
-    cfg.cull_unboxed_movers = false;
-    cfg.object_band_share = share;
-    DynamicFeatureFilter f(cfg);
-    DynamicResult r;
-    cv::Rect2f truth;
-    for (std::size_t i = 1; i < frames.size(); ++i) {
-      truth = test::label_box(frames[i].label, 2);
-      cv::Rect2f cut = truth;
-      cut.y += truth.height / 3;
-      cut.height -= truth.height / 3;
-      Detections det;
-      det.frame_index = i;
-      det.items = {{cut, 0, 0.9f}};
-      r = f.process(sequence_input(frames, i, &kps, &det, true));
-    }
-    ASSERT_EQ(r.boxes.size(), 1u);
-    ASSERT_TRUE(r.box_dynamic[0]);
-    const cv::Rect2f& box = r.boxes[0].box;
-    const float band = static_cast<float>(share) * std::max(box.width, box.height);
-    // The person above the box (clear of its 4 px margin and of the patch's edges).
-    const cv::Rect2f top(truth.x + 6, truth.y + 2, truth.width - 12, box.y - 8 - (truth.y + 2));
-    const cv::Rect2f person_grown(truth.x - 6, truth.y - 6, truth.width + 12, truth.height + 12);
-    const cv::Rect2f band_outer(box.x - band + 2, box.y - band + 2, box.width + 2 * band - 4,
-                                box.height + 2 * band - 4);
-    int person_top = 0, person_top_culled = 0, wall_in_band = 0, wall_in_band_culled = 0;
-    for (std::size_t k = 0; k < kps.size(); ++k) {
-      const cv::Point2f& p = kps[k].pt;
-      if (top.contains(p)) {
-        ++person_top;
-        person_top_culled += r.keypoint_dynamic[k] ? 1 : 0;
-      } else if (!person_grown.contains(p) && band_outer.contains(p)) {
-        ++wall_in_band;
-        wall_in_band_culled += r.keypoint_dynamic[k] ? 1 : 0;
-      }
-    }
-    EXPECT_GT(person_top, 20);
-    EXPECT_EQ(person_top_culled, share > 0 ? person_top : 0);
-    if (share > 0) EXPECT_GT(wall_in_band, 50);
-    EXPECT_EQ(wall_in_band_culled, 0);
+    const BandCounts c = band_counts(0.06, &MotionCheckConfig::object_band_share, share);
+    EXPECT_GT(c.person_top, 20);
+    EXPECT_EQ(c.person_top_culled, share > 0 ? c.person_top : 0);
+    if (share > 0) EXPECT_GT(c.wall, 50);
+    EXPECT_EQ(c.wall_culled, 0);
+  }
+}
+
+// A person standing still (not yet proven still, so its box is dynamic) whose box leaves out its top
+// third: with suspect_band_share those keypoints are kept but marked suspect for the pose guard, the
+// wall's keypoints in the band are not; without it neither is (nothing moves, so no keypoint is suspect
+// for a moving neighbour).
+TEST(MotionCheck, KeypointsJustOutsideADynamicBoxAtTheObjectsDepthAreSuspect) {
+  for (double share : {0.0, 0.5}) {
+    SCOPED_TRACE(share);
+    const BandCounts c = band_counts(0.0, &MotionCheckConfig::suspect_band_share, share);
+    EXPECT_GT(c.person_top, 20);
+    EXPECT_EQ(c.person_top_culled, 0);
+    EXPECT_EQ(c.person_top_suspect, share > 0 ? c.person_top : 0);
+    if (share > 0) EXPECT_GT(c.wall, 50);
+    EXPECT_EQ(c.wall_suspect, 0);
   }
 }
 

@@ -59,6 +59,7 @@ MotionCheckConfig MotionCheckConfig::from_yaml(const ConfigReader& r) {
   r.read("keep_background_in_box", c.keep_background_in_box);
   r.read("background_depth_margin_m", c.background_depth_margin_m, 0.05, 10.0);
   r.read("object_band_share", c.object_band_share, 0.0, 1.0);
+  r.read("suspect_band_share", c.suspect_band_share, 0.0, 1.0);
   r.read("cull_unboxed_movers", c.cull_unboxed_movers);
   r.read("unboxed_depth_separated", c.unboxed_depth_separated);
   r.read("max_moving_share", c.max_moving_share, 0.05, 1.0);

@@ -497,11 +497,11 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
     return std::abs(z - object_depth[b]) <= bg_margin;
   };
   // Per box, the band around it where keypoints at the object's depth are the object (0: none).
-  std::vector<float> band(res.boxes.size(), 0.f);
-  if (cfg_.object_band_share > 0.0) {
-    for (std::size_t b = 0; b < res.boxes.size(); ++b)
-      band[b] = static_cast<float>(cfg_.object_band_share) *
-                std::max(res.boxes[b].box.width, res.boxes[b].box.height);
+  std::vector<float> band(res.boxes.size(), 0.f), suspect_band(res.boxes.size(), 0.f);
+  for (std::size_t b = 0; b < res.boxes.size(); ++b) {
+    const float side = std::max(res.boxes[b].box.width, res.boxes[b].box.height);
+    band[b] = static_cast<float>(cfg_.object_band_share) * side;
+    suspect_band[b] = static_cast<float>(cfg_.suspect_band_share) * side;
   }
   const auto classify = [&] {
     res.culled = 0;
@@ -515,6 +515,10 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
             !inside(grow(box, margin), p) && at_object_depth(b, p).value_or(false)) {
           dyn = near_object = true;
           continue;
+        }
+        if (suspect_band[b] > 2.f * margin && res.box_dynamic[b] && inside(grow(box, suspect_band[b]), p) &&
+            !inside(grow(box, margin), p) && at_object_depth(b, p).value_or(false)) {
+          near_object = true;
         }
         if (!inside(grow(box, 2.f * margin), p)) continue;
         near_object = true;

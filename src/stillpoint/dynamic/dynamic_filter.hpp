@@ -91,6 +91,9 @@ struct MotionCheckConfig {
   // depth (within background_depth_margin_m) is the object too: a box carried from a late detection
   // lags a close person and leaves the head or an arm out (docs/dynamic.md). 0 = off [0, 1].
   double object_band_share = 0.0;
+  // The same band for the pose guard only: such a keypoint is kept but marked suspect, so it is dropped
+  // only on frames whose pose jumps against the prediction (docs/dynamic.md). 0 = off [0, 1].
+  double suspect_band_share = 0.0;
   bool cull_unboxed_movers = true;  // moving point clusters outside boxes are culled too
   // A keypoint is not culled for a nearby mover whose depth differs from its own by more than
   // background_depth_margin_m: background seen beside a close person is not the person. Off: measured
