@@ -496,7 +496,8 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
     if (z <= 0.f) return std::nullopt;
     return std::abs(z - object_depth[b]) <= bg_margin;
   };
-  // Per box, the band around it where keypoints at the object's depth are the object (0: none).
+  // Per box, the bands around it where keypoints at the object's depth are the object (culled) or only
+  // suspect for the pose guard (0: none).
   std::vector<float> band(res.boxes.size(), 0.f), suspect_band(res.boxes.size(), 0.f);
   for (std::size_t b = 0; b < res.boxes.size(); ++b) {
     const float side = std::max(res.boxes[b].box.width, res.boxes[b].box.height);
