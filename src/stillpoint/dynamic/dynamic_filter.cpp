@@ -498,12 +498,22 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
   };
   // Per box, the bands around it where keypoints at the object's depth are the object (culled) or only
   // suspect for the pose guard (0: none).
-  std::vector<float> band(res.boxes.size(), 0.f), suspect_band(res.boxes.size(), 0.f);
-  for (std::size_t b = 0; b < res.boxes.size(); ++b) {
-    const float side = std::max(res.boxes[b].box.width, res.boxes[b].box.height);
-    band[b] = static_cast<float>(cfg_.object_band_share) * side;
-    suspect_band[b] = static_cast<float>(cfg_.suspect_band_share) * side;
-  }
+  const auto band_widths = [&](double share) {
+    std::vector<float> w(res.boxes.size(), 0.f);
+    if (share <= 0.0) return w;
+    for (std::size_t b = 0; b < res.boxes.size(); ++b)
+      w[b] = static_cast<float>(share) * std::max(res.boxes[b].box.width, res.boxes[b].box.height);
+    return w;
+  };
+  const std::vector<float> band = band_widths(cfg_.object_band_share);
+  const std::vector<float> suspect_band = band_widths(cfg_.suspect_band_share);
+  // Whether keypoint p lies in a band `width` wide outside dynamic box b (beyond its margin), at the
+  // object's depth. A band no wider than the margin holds nothing.
+  const auto in_object_band = [&](std::size_t b, const cv::Point2f& p, float width) {
+    const cv::Rect2f& box = res.boxes[b].box;
+    return width > margin && res.box_dynamic[b] && inside(grow(box, width), p) &&
+           !inside(grow(box, margin), p) && at_object_depth(b, p).value_or(false);
+  };
   const auto classify = [&] {
     res.culled = 0;
     for (std::size_t k = 0; k < n_kp; ++k) {
@@ -512,15 +522,11 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
       bool near_object = false;
       for (std::size_t b = 0; b < res.boxes.size() && !dyn; ++b) {
         const cv::Rect2f& box = res.boxes[b].box;
-        if (band[b] > margin && res.box_dynamic[b] && inside(grow(box, band[b]), p) &&
-            !inside(grow(box, margin), p) && at_object_depth(b, p).value_or(false)) {
+        if (in_object_band(b, p, band[b])) {
           dyn = near_object = true;
           continue;
         }
-        if (suspect_band[b] > 2.f * margin && res.box_dynamic[b] && inside(grow(box, suspect_band[b]), p) &&
-            !inside(grow(box, margin), p) && at_object_depth(b, p).value_or(false)) {
-          near_object = true;
-        }
+        if (!near_object && in_object_band(b, p, suspect_band[b])) near_object = true;
         if (!inside(grow(box, 2.f * margin), p)) continue;
         near_object = true;
         if (!res.box_dynamic[b] || !inside(grow(box, margin), p)) continue;

@@ -149,7 +149,9 @@ TrackOutcome Tracker::track_frame(Frame& frame, const MappingStatus& mapping) {
       verify_left_ = config_.relocalization_verify_frames;
       if (verify_left_ == 0) accept_relocalization();
     } else if (verifying) {
-      if (ok && (by_motion || !motion_expected) && consistent_after_relocalization(frame, expected)) {
+      // Tracked the way the verification expects: by the motion model, or by reference without one.
+      const bool tracked_as_expected = ok && (by_motion || !motion_expected);
+      if (tracked_as_expected && consistent_after_relocalization(frame, expected)) {
         if (--verify_left_ == 0) accept_relocalization();
       } else {
         ++reloc_stats_.rejected_by_consistency;
@@ -158,8 +160,8 @@ TrackOutcome Tracker::track_frame(Frame& frame, const MappingStatus& mapping) {
             "relocalisation at frame {} rejected: frame {} did not track consistently from it ({}, {} "
             "inliers, {:.1f} cm / {:.2f} deg from the {})",
             reloc_frame_, frame.index,
-            ok ? (by_motion || !motion_expected ? "tracked" : "tracked by reference") : "not tracked",
-            frame.matched(), 100.0 * d.translation_m, d.rotation_deg, predicted ? "prediction" : "last pose");
+            tracked_as_expected ? "tracked" : (ok ? "tracked by reference" : "not tracked"), frame.matched(),
+            100.0 * d.translation_m, d.rotation_deg, predicted ? "prediction" : "last pose");
         verify_left_ = 0;
         unverified_.clear();  // already counted as lost
         ok = false;
