@@ -77,4 +77,35 @@ inline DynamicInput still_input(const Rendered& f, std::size_t i, const std::vec
   return in;
 }
 
+// Keypoints inside `r`: how many, and how many of them `flag` marks.
+struct InRect {
+  int total = 0, flagged = 0;
+};
+inline InRect count_in(const cv::Rect2f& r, const std::vector<cv::KeyPoint>& kps,
+                       const std::vector<bool>& flag) {
+  InRect c;
+  for (std::size_t k = 0; k < kps.size(); ++k) {
+    if (!r.contains(kps[k].pt)) continue;
+    ++c.total;
+    c.flagged += flag[k] ? 1 : 0;
+  }
+  return c;
+}
+
+// A still camera watching a still person (box `person`, detected in every frame) over frames 1..n of
+// the same image, with static_proof_frames as in `cfg`; the last frame's result.
+inline DynamicResult still_person_frames(const MotionCheckConfig& cfg, const Rendered& f,
+                                         const cv::Rect2f& person, const std::vector<cv::KeyPoint>& kps,
+                                         std::size_t n) {
+  DynamicFeatureFilter filter(cfg);
+  DynamicResult r;
+  for (std::size_t i = 1; i <= n; ++i) {
+    Detections det;
+    det.frame_index = i;
+    det.items = {{person, 0, 0.9f}};
+    r = filter.process(still_input(f, i, &kps, &det));
+  }
+  return r;
+}
+
 }  // namespace sp::dyn::test

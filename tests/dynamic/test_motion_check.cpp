@@ -380,14 +380,8 @@ TEST(MotionCheck, ProvenStillPeopleAreCulledUnlessTheRestIsTooPoor) {
   for (const std::vector<cv::KeyPoint>* kps : {&all, static_cast<const std::vector<cv::KeyPoint>*>(&poor)}) {
     MotionCheckConfig cfg;
     cfg.static_proof_frames = 2;
-    DynamicFeatureFilter filter(cfg);
-    DynamicResult r;
-    for (std::size_t i = 1; i <= 4; ++i) {  // proven still from frame 2 on
-      Detections det;
-      det.frame_index = i;
-      det.items = {{person, 0, 0.9f}};
-      r = filter.process(still_input(f, i, kps, &det));
-    }
+    const DynamicResult r =
+        test::still_person_frames(cfg, f, person, *kps, 4);  // proven still from frame 2 on
     int person_kept = 0, person_total = 0;
     for (std::size_t k = 0; k < kps->size(); ++k) {
       if (!person.contains((*kps)[k].pt)) continue;

@@ -235,14 +235,9 @@ TEST(MotionCheck, BoxEdgeNearTheImageEdgeIsSnappedOntoIt) {
     EXPECT_EQ(box.y + box.height, cut.y + cut.height);
     // The person above the detected box (clear of its 4 px margin and of the patch's sides).
     const cv::Rect2f top(truth.x + 6, 0, truth.width - 12, cut.y - 5);
-    int person_top = 0, person_top_culled = 0;
-    for (std::size_t k = 0; k < kps.size(); ++k) {
-      if (!top.contains(kps[k].pt)) continue;
-      ++person_top;
-      person_top_culled += r.keypoint_dynamic[k] ? 1 : 0;
-    }
-    EXPECT_GT(person_top, 10);
-    EXPECT_EQ(person_top_culled, snap > 0 ? person_top : 0);
+    const test::InRect person_top = test::count_in(top, kps, r.keypoint_dynamic);
+    EXPECT_GT(person_top.total, 10);
+    EXPECT_EQ(person_top.flagged, snap > 0 ? person_top.total : 0);
   }
 }
 

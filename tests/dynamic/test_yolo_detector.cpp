@@ -208,6 +208,12 @@ TEST(DetectorConfigFiles, ShippedExamplesParse) {
   EXPECT_EQ(m.max_points, d.max_points);
   EXPECT_DOUBLE_EQ(m.background_depth_margin_m, d.background_depth_margin_m);
   EXPECT_EQ(m.box_points, d.box_points);
+  EXPECT_EQ(m.static_proof_frames, d.static_proof_frames);
+  EXPECT_EQ(m.still_people_fallback_keypoints, d.still_people_fallback_keypoints);
+  EXPECT_DOUBLE_EQ(m.still_people_fallback_coverage, d.still_people_fallback_coverage);
+  EXPECT_EQ(m.joint_fit_still, d.joint_fit_still);
+  EXPECT_DOUBLE_EQ(m.joint_fit_max_change_m, d.joint_fit_max_change_m);
+  EXPECT_DOUBLE_EQ(m.joint_fit_max_change_deg, d.joint_fit_max_change_deg);
 }
 
 TEST(DetectorConfigFiles, ShippedYoloxConfigFindsThePerson) {

@@ -55,6 +55,10 @@ MotionCheckConfig MotionCheckConfig::from_yaml(const ConfigReader& r) {
   r.read("dynamic_hold_frames", c.dynamic_hold_frames, 0, 1000);
   r.read("static_proof_frames", c.static_proof_frames, 0, 1000);
   r.read("still_people_fallback_keypoints", c.still_people_fallback_keypoints, 0, 100000);
+  r.read("still_people_fallback_coverage", c.still_people_fallback_coverage, 0.0, 1.0);
+  r.read("joint_fit_still", c.joint_fit_still);
+  r.read("joint_fit_max_change_m", c.joint_fit_max_change_m, 0.0, 1.0);
+  r.read("joint_fit_max_change_deg", c.joint_fit_max_change_deg, 0.0, 45.0);
   r.read("ratio_at_object_depth", c.ratio_at_object_depth);
   r.read("keep_background_in_box", c.keep_background_in_box);
   r.read("background_depth_margin_m", c.background_depth_margin_m, 0.05, 10.0);

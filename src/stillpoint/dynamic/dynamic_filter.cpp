@@ -3,6 +3,7 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstring>
 #include <limits>
@@ -186,6 +187,22 @@ bool carry_box(cv::Rect2f& box, const std::vector<cv::Point2f>& prev, const std:
   return true;
 }
 
+// Share of the cells of an 8 x 6 grid over the image that hold a keypoint not culled.
+double kept_coverage(const std::vector<cv::KeyPoint>& kps, const std::vector<bool>& culled,
+                     const cv::Size& image) {
+  constexpr int kCols = 8, kRows = 6;
+  std::array<bool, kCols * kRows> cell{};
+  for (std::size_t k = 0; k < kps.size(); ++k) {
+    if (culled[k]) continue;
+    const int c =
+        std::clamp(static_cast<int>(kps[k].pt.x * kCols / static_cast<float>(image.width)), 0, kCols - 1);
+    const int r =
+        std::clamp(static_cast<int>(kps[k].pt.y * kRows / static_cast<float>(image.height)), 0, kRows - 1);
+    cell[static_cast<std::size_t>(r * kCols + c)] = true;
+  }
+  return static_cast<double>(std::count(cell.begin(), cell.end(), true)) / (kCols * kRows);
+}
+
 // Moves each edge of the box that lies within `snap` px of the image's edge onto it.
 void snap_to_border(cv::Rect2f& box, const cv::Size& image, float snap) {
   const auto w = static_cast<float>(image.width), h = static_cast<float>(image.height);
@@ -334,6 +351,8 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
   // 3. Residual of each point after removing the camera's own motion.
   res.flow_residual.assign(n, -1.f);
   std::vector<bool> moving(n, false);
+  std::optional<CameraMotion> ego_motion;  // the motion the reprojection residuals were computed under
+  std::vector<std::size_t> ego_fit_inliers;
   if (n >= 8) {
     std::vector<int> fit;  // static candidates: outside the boxes
     for (std::size_t i = 0; i < n; ++i) {
@@ -349,9 +368,18 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
     }
     std::vector<float> eps(n, 0.f);
     bool done = false;
-    if (want_reproj) done = reprojection_residuals(in, fit, res, eps);
-    if (!done) epipolar_residuals(fit, res, eps);
+    if (want_reproj) done = reprojection_residuals(in, fit, res, eps, &ego_motion.emplace());
+    if (!done) {
+      ego_motion.reset();
+      epipolar_residuals(fit, res, eps);
+    }
     for (std::size_t i = 0; i < n; ++i) moving[i] = res.flow_residual[i] > eps[i];
+    if (ego_motion) {
+      for (int i : fit) {
+        const auto k = static_cast<std::size_t>(i);
+        if (res.flow_residual[k] >= 0.f && !moving[k]) ego_fit_inliers.push_back(k);
+      }
+    }
     int fitted = 0, fitted_moving = 0;
     for (int i : fit) {
       if (res.flow_residual[static_cast<std::size_t>(i)] < 0.f) continue;
@@ -414,6 +442,17 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
       seen = static_cast<double>(mov) >= cfg_.moving_ratio_threshold * static_cast<double>(total)
                  ? Seen::kMoving
                  : Seen::kStill;
+    }
+    if (seen == Seen::kMoving && cfg_.joint_fit_still && ego_motion) {
+      std::vector<std::size_t> object;
+      for (std::size_t m = 0; m < members.size(); ++m) {
+        if (member_z[m] > 0.f && std::abs(member_z[m] - object_depth[b]) <= bg_margin)
+          object.push_back(members[m]);
+      }
+      if (static_cast<int>(object.size()) >= cfg_.min_points_to_decide &&
+          explained_by_camera(in, res, ego_fit_inliers, object, *ego_motion)) {
+        seen = Seen::kStill;
+      }
     }
     // The same object in earlier frames: the unused track of its class with the largest overlap.
     std::size_t match = tracks_.size();
@@ -554,7 +593,12 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
   // People proven still are culled too while enough keypoints remain without them; only when the
   // rest of the image is too poor are their features used (marked suspect for the pose guard).
   const bool any_still = std::find(still_person.begin(), still_person.end(), true) != still_person.end();
-  if (any_still && static_cast<int>(n_kp) - res.culled < cfg_.still_people_fallback_keypoints) {
+  const bool poor =
+      any_still && (static_cast<int>(n_kp) - res.culled < cfg_.still_people_fallback_keypoints ||
+                    (cfg_.still_people_fallback_coverage > 0.0 && in.keypoints != nullptr &&
+                     kept_coverage(*in.keypoints, res.keypoint_dynamic, gray.size()) <
+                         cfg_.still_people_fallback_coverage));
+  if (poor) {
     for (std::size_t b = 0; b < res.boxes.size(); ++b) {
       if (still_person[b]) res.box_dynamic[b] = false;
     }

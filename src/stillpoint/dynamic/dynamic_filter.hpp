@@ -12,6 +12,7 @@
 
 #include "stillpoint/common/config_reader.hpp"
 #include "stillpoint/dynamic/detection.hpp"
+#include "stillpoint/dynamic/ego_motion_fit.hpp"
 
 namespace sp::dyn {
 
@@ -80,6 +81,19 @@ struct MotionCheckConfig {
   // a last resort, used only when the rest of the image is too poor to track [0, 100000]. 0 = still
   // people are always culled; a value above the keypoint count = always kept (the paper's reading).
   int still_people_fallback_keypoints = 150;
+  // ... or unless the keypoints left without them cover less than this share of an 8 x 6 grid over the
+  // image: many keypoints in one strip beside a person filling the view pin the pose poorly [0, 1];
+  // 0 = the count alone.
+  double still_people_fallback_coverage = 0.3;
+  // A box the camera-motion fit (on the points outside the boxes) calls moving is re-checked: when one
+  // camera motion refitted on the fit's inliers and the box's points at the object's depth together
+  // keeps both within the residual threshold, the box moved only as much as the fit erred (a person
+  // filling most of the view leaves few points to fit on: room209_walking_xyz, docs/dynamic.md) and
+  // is seen still. The refit may differ from the first fit only a little: a rotation and a translation
+  // together explain any sideways shift of a near layer against a far one, a walker included.
+  bool joint_fit_still = true;
+  double joint_fit_max_change_m = 0.03;   // m, the refit's translation from the first fit's at most [0, 1]
+  double joint_fit_max_change_deg = 0.6;  // deg, its rotation from the first fit's at most [0, 45]
   // The moving share of a box is counted over the points at the object's depth only, so background
   // seen through a loose box does not outvote the person [true]; false = over all points in the box.
   bool ratio_at_object_depth = true;
@@ -190,8 +204,15 @@ class DynamicFeatureFilter {
   std::vector<Detection> coast_boxes(const std::vector<Detection>& detected, std::size_t frame) const;
   // Fill res.flow_residual and eps (per-point threshold) from the points `fit` (static candidates).
   // Reprojection: camera motion by PnP-RANSAC on depth; false when it cannot be estimated.
+  // `motion` (may be null) receives the camera motion the residuals were computed under.
   bool reprojection_residuals(const DynamicInput& in, const std::vector<int>& fit, DynamicResult& res,
-                              std::vector<float>& eps) const;
+                              std::vector<float>& eps, CameraMotion* motion = nullptr) const;
+  // joint_fit_still: whether one camera motion, refitted from `motion` on the points `background` (the
+  // camera fit's inliers) and `object` (a box's points) together, keeps both groups within the
+  // reprojection threshold (moving share below moving_ratio_threshold in each).
+  bool explained_by_camera(const DynamicInput& in, const DynamicResult& res,
+                           const std::vector<std::size_t>& background, const std::vector<std::size_t>& object,
+                           const CameraMotion& motion) const;
   // Epipolar distance to an F fitted by RANSAC, or the homography transfer error when a homography
   // explains the motion as well (static or rotating camera, far scene: F is degenerate there).
   void epipolar_residuals(const std::vector<int>& fit, DynamicResult& res, std::vector<float>& eps) const;
