@@ -351,8 +351,8 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
   // 3. Residual of each point after removing the camera's own motion.
   res.flow_residual.assign(n, -1.f);
   std::vector<bool> moving(n, false);
-  std::optional<CameraMotion> ego_motion;  // the motion the reprojection residuals were computed under
-  std::vector<std::size_t> ego_fit_inliers;
+  std::optional<EgoFit> ego;                 // the motion the reprojection residuals were computed under
+  std::vector<std::size_t> ego_fit_inliers;  // joint_fit_still: the fitted points that came out static
   if (n >= 8) {
     std::vector<int> fit;  // static candidates: outside the boxes
     for (std::size_t i = 0; i < n; ++i) {
@@ -368,13 +368,13 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
     }
     std::vector<float> eps(n, 0.f);
     bool done = false;
-    if (want_reproj) done = reprojection_residuals(in, fit, res, eps, &ego_motion.emplace());
+    if (want_reproj) done = reprojection_residuals(in, fit, res, eps, &ego.emplace());
     if (!done) {
-      ego_motion.reset();
+      ego.reset();
       epipolar_residuals(fit, res, eps);
     }
     for (std::size_t i = 0; i < n; ++i) moving[i] = res.flow_residual[i] > eps[i];
-    if (ego_motion) {
+    if (ego && cfg_.joint_fit_still) {
       for (int i : fit) {
         const auto k = static_cast<std::size_t>(i);
         if (res.flow_residual[k] >= 0.f && !moving[k]) ego_fit_inliers.push_back(k);
@@ -422,14 +422,16 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
       z.insert(z.end(), z_moving.begin(), z_moving.end());
       object_depth[b] = z.size() >= 3 ? quantile_of(z, 0.3) : 0.f;
     }
+    std::vector<std::size_t> depth_members;  // members within the margin of the object's depth
+    for (std::size_t m = 0; m < members.size(); ++m) {
+      if (member_z[m] > 0.f && std::abs(member_z[m] - object_depth[b]) <= bg_margin)
+        depth_members.push_back(members[m]);
+    }
     // The vote: over the points at the object's depth when there are enough, else over all of them.
     int total = 0, mov = 0;
     if (cfg_.ratio_at_object_depth && object_depth[b] > 0.f) {
-      for (std::size_t m = 0; m < members.size(); ++m) {
-        if (member_z[m] <= 0.f || std::abs(member_z[m] - object_depth[b]) > bg_margin) continue;
-        ++total;
-        mov += moving[members[m]] ? 1 : 0;
-      }
+      total = static_cast<int>(depth_members.size());
+      for (std::size_t i : depth_members) mov += moving[i] ? 1 : 0;
     }
     if (total < cfg_.min_points_to_decide) {
       total = static_cast<int>(members.size());
@@ -443,16 +445,10 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
                  ? Seen::kMoving
                  : Seen::kStill;
     }
-    if (seen == Seen::kMoving && cfg_.joint_fit_still && ego_motion) {
-      std::vector<std::size_t> object;
-      for (std::size_t m = 0; m < members.size(); ++m) {
-        if (member_z[m] > 0.f && std::abs(member_z[m] - object_depth[b]) <= bg_margin)
-          object.push_back(members[m]);
-      }
-      if (static_cast<int>(object.size()) >= cfg_.min_points_to_decide &&
-          explained_by_camera(in, res, ego_fit_inliers, object, *ego_motion)) {
-        seen = Seen::kStill;
-      }
+    if (seen == Seen::kMoving && cfg_.joint_fit_still && ego &&
+        static_cast<int>(depth_members.size()) >= cfg_.min_points_to_decide &&
+        explained_by_camera(in, res, *ego, ego_fit_inliers, depth_members)) {
+      seen = Seen::kStill;
     }
     // The same object in earlier frames: the unused track of its class with the largest overlap.
     std::size_t match = tracks_.size();

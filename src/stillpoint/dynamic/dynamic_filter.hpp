@@ -202,17 +202,25 @@ class DynamicFeatureFilter {
   std::vector<Detection> carry_boxes(const Detections& d, std::size_t to_frame) const;
   // Boxes of recently moving tracks that no carried detection overlaps, moved by this frame's flow.
   std::vector<Detection> coast_boxes(const std::vector<Detection>& detected, std::size_t frame) const;
+  // The camera motion the reprojection residuals were computed under, and every tracked point
+  // back-projected into the current camera (has_z: it had depth), for the joint refit.
+  struct EgoFit {
+    CameraMotion motion;
+    std::vector<cv::Point3f> X;
+    std::vector<bool> has_z;
+  };
   // Fill res.flow_residual and eps (per-point threshold) from the points `fit` (static candidates).
-  // Reprojection: camera motion by PnP-RANSAC on depth; false when it cannot be estimated.
-  // `motion` (may be null) receives the camera motion the residuals were computed under.
+  // Reprojection: camera motion by PnP-RANSAC on depth; false when it cannot be estimated. `ego` (may
+  // be null) receives the motion and the back-projected points.
   bool reprojection_residuals(const DynamicInput& in, const std::vector<int>& fit, DynamicResult& res,
-                              std::vector<float>& eps, CameraMotion* motion = nullptr) const;
-  // joint_fit_still: whether one camera motion, refitted from `motion` on the points `background` (the
-  // camera fit's inliers) and `object` (a box's points) together, keeps both groups within the
-  // reprojection threshold (moving share below moving_ratio_threshold in each).
-  bool explained_by_camera(const DynamicInput& in, const DynamicResult& res,
-                           const std::vector<std::size_t>& background, const std::vector<std::size_t>& object,
-                           const CameraMotion& motion) const;
+                              std::vector<float>& eps, EgoFit* ego = nullptr) const;
+  // joint_fit_still: whether one camera motion, refitted from ego's on the tracked points `background`
+  // (the camera fit's inliers) and `object` (a box's points) together, keeps both groups within the
+  // reprojection threshold (moving share below moving_ratio_threshold in each). Points without depth
+  // are left out.
+  bool explained_by_camera(const DynamicInput& in, const DynamicResult& res, const EgoFit& ego,
+                           const std::vector<std::size_t>& background,
+                           const std::vector<std::size_t>& object) const;
   // Epipolar distance to an F fitted by RANSAC, or the homography transfer error when a homography
   // explains the motion as well (static or rotating camera, far scene: F is degenerate there).
   void epipolar_residuals(const std::vector<int>& fit, DynamicResult& res, std::vector<float>& eps) const;

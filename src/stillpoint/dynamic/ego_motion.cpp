@@ -201,7 +201,7 @@ std::optional<CameraMotion> fit_camera_motion_msac(const MotionFitPoints& pts, c
 
 bool DynamicFeatureFilter::reprojection_residuals(const DynamicInput& in, const std::vector<int>& fit,
                                                   DynamicResult& res, std::vector<float>& eps,
-                                                  CameraMotion* motion) const {
+                                                  EgoFit* ego) const {
   const auto& cur = res.flow_points;
   const auto& prev = res.flow_prev;
   const std::size_t n = cur.size();
@@ -287,7 +287,6 @@ bool DynamicFeatureFilter::reprojection_residuals(const DynamicInput& in, const 
   const cv::Matx33d R(Rm);
   const cv::Vec3d t(tvec.at<double>(0), tvec.at<double>(1), tvec.at<double>(2));
   const cv::Matx33d Kx(Kcv);
-  if (motion != nullptr) *motion = CameraMotion{R, t, res.ego_inliers};
   const DepthlessResidual depthless(Kx, Kx.inv(), R, t);  // points without usable depth
   for (std::size_t i = 0; i < n; ++i) {
     if (has_z[i]) {
@@ -303,78 +302,61 @@ bool DynamicFeatureFilter::reprojection_residuals(const DynamicInput& in, const 
   }
   if (cfg_.depthless_homography) depthless_homography_residuals(fit, has_z, res);
   res.residual_used = "reprojection";
+  if (ego != nullptr) *ego = EgoFit{CameraMotion{R, t, res.ego_inliers}, std::move(X), std::move(has_z)};
   return true;
 }
 
 bool DynamicFeatureFilter::explained_by_camera(const DynamicInput& in, const DynamicResult& res,
-                                               const std::vector<std::size_t>& background,
-                                               const std::vector<std::size_t>& object,
-                                               const CameraMotion& motion) const {
-  const Eigen::Matrix3d& K = *in.K;
-  const double fx = K(0, 0), fy = K(1, 1), cx = K(0, 2), cy = K(1, 2);
-  std::vector<cv::Point3f> X;
-  std::vector<cv::Point2f> x_prev;
+                                               const EgoFit& ego, const std::vector<std::size_t>& background,
+                                               const std::vector<std::size_t>& object) const {
+  MotionFitPoints pts;
   std::vector<int> group;  // 0 background, 1 object
-  const auto add = [&](const std::vector<std::size_t>& idx, int g) {
-    for (std::size_t i : idx) {
-      const cv::Point2f& c = res.flow_points[i];
-      const float z = stable_depth(*in.depth, c);
-      if (z <= 0.f) continue;
-      X.emplace_back(static_cast<float>((c.x - cx) * z / fx), static_cast<float>((c.y - cy) * z / fy), z);
-      x_prev.push_back(res.flow_prev[i]);
+  for (const auto& [idx, g] : {std::pair{&background, 0}, std::pair{&object, 1}}) {
+    for (std::size_t i : *idx) {
+      if (!ego.has_z[i]) continue;
+      pts.cur_3d.push_back(ego.X[i]);
+      pts.prev_px.push_back(res.flow_prev[i]);
       group.push_back(g);
     }
-  };
-  add(background, 0);
-  add(object, 1);
-  if (X.size() < 8) return false;  // as the first fit needs
-  cv::Mat Kcv;
-  cv::eigen2cv(K, Kcv);
-  cv::Mat rvec, tvec = cv::Mat(motion.t, true);
-  cv::Rodrigues(cv::Mat(motion.R), rvec);
-  const auto eps = cfg_.epsilon_reprojection_px;
-  // Reprojection residual of every point under (rvec, tvec), px.
-  const auto residuals = [&] {
+  }
+  if (pts.cur_3d.size() < 8) return false;  // as the first fit needs
+  cv::Matx33d K;
+  cv::eigen2cv(*in.K, K);
+  cv::Mat rvec, tvec = cv::Mat(ego.motion.t, true);
+  cv::Rodrigues(cv::Mat(ego.motion.R), rvec);
+  const auto R = [&] {
     cv::Mat Rm;
     cv::Rodrigues(rvec, Rm);
-    const cv::Matx33d R(Rm);
-    const cv::Vec3d t(tvec.at<double>(0), tvec.at<double>(1), tvec.at<double>(2));
-    std::vector<double> r(X.size(), std::numeric_limits<double>::max());
-    for (std::size_t i = 0; i < X.size(); ++i) {
-      const cv::Vec3d q = R * cv::Vec3d(X[i].x, X[i].y, X[i].z) + t;
-      if (q[2] > 1e-6)
-        r[i] = std::hypot(fx * q[0] / q[2] + cx - x_prev[i].x, fy * q[1] / q[2] + cy - x_prev[i].y);
-    }
-    return r;
+    return cv::Matx33d(Rm);
   };
+  const auto t = [&] { return cv::Vec3d(tvec.at<double>(0), tvec.at<double>(1), tvec.at<double>(2)); };
+  const double eps2 = cfg_.epsilon_reprojection_px * cfg_.epsilon_reprojection_px;
+  std::vector<double> r2(pts.cur_3d.size(), 0.0);
   // Least squares from the first fit, then again without the points it leaves beyond the threshold
   // (an arm that moves must not drag the joint motion).
   for (int round = 0; round < 2; ++round) {
-    const std::vector<double> r = round == 1 ? residuals() : std::vector<double>(X.size(), 0.0);
+    if (round == 1) squared_residuals(pts, K, R(), t(), r2);
     std::vector<cv::Point3f> o;
     std::vector<cv::Point2f> p;
-    for (std::size_t i = 0; i < X.size(); ++i) {
-      if (r[i] > eps) continue;
-      o.push_back(X[i]);
-      p.push_back(x_prev[i]);
+    for (std::size_t i = 0; i < r2.size(); ++i) {
+      if (r2[i] > eps2) continue;
+      o.push_back(pts.cur_3d[i]);
+      p.push_back(pts.prev_px[i]);
     }
     if (o.size() < 6) return false;
-    cv::solvePnP(o, p, Kcv, cv::noArray(), rvec, tvec, true, cv::SOLVEPNP_ITERATIVE);
+    cv::solvePnP(o, p, K, cv::noArray(), rvec, tvec, true, cv::SOLVEPNP_ITERATIVE);
   }
   // Only a small correction of the first fit counts: two depth layers are explained exactly by some
   // rotation and translation together, a person walking in front of a wall included.
-  cv::Mat Rj;
-  cv::Rodrigues(rvec, Rj);
-  const cv::Matx33d dR = cv::Matx33d(Rj) * motion.R.t();
-  const double dt =
-      cv::norm(cv::Vec3d(tvec.at<double>(0), tvec.at<double>(1), tvec.at<double>(2)) - motion.t);
+  const cv::Matx33d dR = R() * ego.motion.R.t();
   const double dang = std::acos(std::clamp((cv::trace(dR) - 1.0) / 2.0, -1.0, 1.0)) * 180.0 / M_PI;
-  if (dt > cfg_.joint_fit_max_change_m || dang > cfg_.joint_fit_max_change_deg) return false;
-  const std::vector<double> r = residuals();
+  if (cv::norm(t() - ego.motion.t) > cfg_.joint_fit_max_change_m || dang > cfg_.joint_fit_max_change_deg)
+    return false;
+  squared_residuals(pts, K, R(), t(), r2);
   std::array<int, 2> total{0, 0}, moving{0, 0};
-  for (std::size_t i = 0; i < X.size(); ++i) {
+  for (std::size_t i = 0; i < r2.size(); ++i) {
     ++total[static_cast<std::size_t>(group[i])];
-    moving[static_cast<std::size_t>(group[i])] += r[i] > eps ? 1 : 0;
+    moving[static_cast<std::size_t>(group[i])] += r2[i] > eps2 ? 1 : 0;
   }
   for (std::size_t g = 0; g < 2; ++g) {
     if (total[g] == 0 || static_cast<double>(moving[g]) >= cfg_.moving_ratio_threshold * total[g])
