@@ -95,5 +95,49 @@ TEST(MotionCheck, AStillPersonAMisfittedCameraMotionMovesIsSeenStillByAJointFit)
   EXPECT_TRUE(dynamic_person(depth_on(walking, 2), 2, true));
 }
 
+// A person in use (proven still, kept because the rest covers too little of the image) starts to walk:
+// 2 mm per frame is 0.5 px at 2 m, under the 2 px threshold of any one frame step, so the person stays
+// in use and drags the pose. Over a span of 8 frames the steps add up past the threshold, and the
+// person is culled again; a person who stays still stays in use (the control).
+TEST(MotionCheck, APersonInUseWhoStartsToWalkIsCulledByTheLongerSpan) {
+  const Scene s;
+  constexpr int kStill = 6, kFrames = 20;
+  const auto frames_for = [&](double step_m) {
+    std::vector<Rendered> frames;
+    for (int i = 0; i < kFrames; ++i)
+      frames.push_back(
+          test::render(s.planes({step_m * std::max(0, i - kStill), 0}), Eigen::Isometry3d::Identity()));
+    return frames;
+  };
+  const cv::Rect2f strip(570.f, 0.f, 70.f, 480.f);  // wall only: too little of the image to track on
+  // Whether the person is in use on the last frame, and on how many frames after the start it was.
+  const auto run = [&](const std::vector<Rendered>& frames, int span) {
+    MotionCheckConfig cfg;
+    cfg.static_proof_frames = 2;
+    cfg.used_person_baseline_frames = span;
+    DynamicFeatureFilter filter(cfg);
+    int used_after_start = 0;
+    DynamicResult r;
+    for (std::size_t i = 1; i < frames.size(); ++i) {
+      const cv::Rect2f person = test::label_box(frames[i].label, 2);
+      const std::vector<cv::KeyPoint> kps = keypoints_in(test::grid_keypoints(640, 480, 8), {person, strip});
+      Detections det;
+      det.frame_index = i;
+      det.items = {{person, 0, 0.9f}};
+      r = filter.process(test::sequence_input(frames, i, &kps, &det, true));
+      if (static_cast<int>(i) > kStill + 1) used_after_start += r.still_people_released ? 1 : 0;
+      if (static_cast<int>(i) == kStill) {
+        EXPECT_TRUE(r.still_people_released) << "span " << span;
+      }
+    }
+    return used_after_start;
+  };
+  const int frames_after_start = kFrames - kStill - 2;
+  const std::vector<Rendered> walks = frames_for(0.002);
+  EXPECT_EQ(run(walks, 0), frames_after_start);  // control: every one-frame step looks still
+  EXPECT_LT(run(walks, 8), frames_after_start / 2);
+  EXPECT_EQ(run(frames_for(0.0), 8), frames_after_start);  // a still person stays in use
+}
+
 }  // namespace
 }  // namespace sp::dyn

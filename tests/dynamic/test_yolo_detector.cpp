@@ -214,6 +214,7 @@ TEST(DetectorConfigFiles, ShippedExamplesParse) {
   EXPECT_EQ(m.joint_fit_still, d.joint_fit_still);
   EXPECT_DOUBLE_EQ(m.joint_fit_max_change_m, d.joint_fit_max_change_m);
   EXPECT_DOUBLE_EQ(m.joint_fit_max_change_deg, d.joint_fit_max_change_deg);
+  EXPECT_EQ(m.used_person_baseline_frames, d.used_person_baseline_frames);
 }
 
 TEST(DetectorConfigFiles, ShippedYoloxConfigFindsThePerson) {

@@ -59,6 +59,7 @@ MotionCheckConfig MotionCheckConfig::from_yaml(const ConfigReader& r) {
   r.read("joint_fit_still", c.joint_fit_still);
   r.read("joint_fit_max_change_m", c.joint_fit_max_change_m, 0.0, 1.0);
   r.read("joint_fit_max_change_deg", c.joint_fit_max_change_deg, 0.0, 45.0);
+  r.read("used_person_baseline_frames", c.used_person_baseline_frames, 0, 30);
   r.read("ratio_at_object_depth", c.ratio_at_object_depth);
   r.read("keep_background_in_box", c.keep_background_in_box);
   r.read("background_depth_margin_m", c.background_depth_margin_m, 0.05, 10.0);

@@ -153,6 +153,7 @@ void DynamicFeatureFilter::reset() {
   tracks_.clear();
   cached_gray_.release();
   cached_pyr_.clear();
+  stored_.clear();
 }
 
 namespace {
@@ -314,6 +315,11 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
                                cv::OPTFLOW_USE_INITIAL_FLOW);
       gray.copyTo(cached_gray_);
       cached_pyr_ = pyr_cur;
+      if (cfg_.used_person_baseline_frames > 1) {
+        if (!stored_.empty() && stored_.back().frame_index + 1 != in.frame_index) stored_.clear();
+        stored_.push_back({in.frame_index, pyr_cur, std::nullopt});
+        while (static_cast<int>(stored_.size()) > cfg_.used_person_baseline_frames + 1) stored_.pop_front();
+      }
       const cv::Rect2f image(0.f, 0.f, static_cast<float>(gray.cols), static_cast<float>(gray.rows));
       const auto fb2 = static_cast<float>(cfg_.fb_max_px * cfg_.fb_max_px);
       for (std::size_t i = 0; i < cand.size(); ++i) {
@@ -324,10 +330,12 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
         }
       }
     }
+    if (!stored_.empty() && stored_.back().frame_index != in.frame_index) stored_.clear();
     history_.push_back({in.frame_index, prev, cur});
     while (static_cast<int>(history_.size()) > cfg_.max_history_frames) history_.pop_front();
   } else if (!has_prev) {
     history_.clear();
+    stored_.clear();
   }
 
   // 2. Candidate boxes, carried from the detection's frame to this one.
@@ -374,7 +382,9 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
       epipolar_residuals(fit, res, eps);
     }
     for (std::size_t i = 0; i < n; ++i) moving[i] = res.flow_residual[i] > eps[i];
-    if (ego && cfg_.joint_fit_still) {
+    if (ego && !stored_.empty() && stored_.back().frame_index == in.frame_index)
+      stored_.back().motion = ego->motion;
+    if (ego && (cfg_.joint_fit_still || cfg_.used_person_baseline_frames > 1)) {
       for (int i : fit) {
         const auto k = static_cast<std::size_t>(i);
         if (res.flow_residual[k] >= 0.f && !moving[k]) ego_fit_inliers.push_back(k);
@@ -399,6 +409,7 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
   const auto bg_margin = static_cast<float>(cfg_.background_depth_margin_m);
   std::vector<bool> track_used(tracks_.size(), false);
   std::vector<bool> still_person(res.boxes.size(), false);  // proven still: culled unless needed
+  std::vector<std::size_t> box_track(res.boxes.size());     // each box's track in tracks_
   for (std::size_t b = 0; b < res.boxes.size(); ++b) {
     const Detection& det = res.boxes[b];
     const bool always = det.class_id >= 0 &&
@@ -447,7 +458,7 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
     }
     if (seen == Seen::kMoving && cfg_.joint_fit_still && ego &&
         static_cast<int>(depth_members.size()) >= cfg_.min_points_to_decide &&
-        explained_by_camera(in, res, *ego, ego_fit_inliers, depth_members)) {
+        explained_by_camera(*in.K, ego->motion, *ego, res.flow_prev, ego_fit_inliers, depth_members)) {
       seen = Seen::kStill;
     }
     // The same object in earlier frames: the unused track of its class with the largest overlap.
@@ -458,11 +469,20 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
       if (!track_used[t] && tracks_[t].class_id == det.class_id && o > best_iou) best_iou = o, match = t;
     }
     if (match == tracks_.size()) {
-      tracks_.push_back({det.box, det.class_id, in.frame_index, in.frame_index, std::nullopt, 0});
+      tracks_.push_back(
+          {det.box, det.class_id, in.frame_index, in.frame_index, std::nullopt, 0, 0, std::nullopt});
       track_used.push_back(false);
     }
     track_used[match] = true;
+    box_track[b] = match;
     BoxTrack& track = tracks_[match];
+    // A person in use lately is also judged over a longer span: the first steps of a walk are small.
+    const auto span = static_cast<std::size_t>(cfg_.used_person_baseline_frames);
+    if (seen == Seen::kStill && span > 1 && ego && track.last_used_frame &&
+        in.frame_index - *track.last_used_frame <= span &&
+        moved_over_baseline(in, res, *ego, ego_fit_inliers, depth_members).value_or(false)) {
+      seen = Seen::kMoving;
+    }
     track.box = det.box;
     track.last_seen_frame = in.frame_index;
     if (b < n_detected) track.last_detected_frame = in.frame_index;
@@ -494,10 +514,6 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
     res.box_dynamic[b] = dyn || still_person[b];
     if (res.box_dynamic[b]) track.last_culled_frame = in.frame_index;
   }
-  std::erase_if(tracks_, [&](const BoxTrack& t) {
-    return in.frame_index > t.last_seen_frame + static_cast<std::size_t>(std::max(cfg_.dynamic_hold_frames,
-                                                                                  cfg_.max_history_frames));
-  });
 
   // 5. Confirmed movers: moving points with enough moving neighbours (isolated ones are noise).
   const bool cull_movers = flow_judges && (cfg_.mode == CullMode::kFlowOnly || cfg_.cull_unboxed_movers);
@@ -596,11 +612,18 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
                          cfg_.still_people_fallback_coverage));
   if (poor) {
     for (std::size_t b = 0; b < res.boxes.size(); ++b) {
-      if (still_person[b]) res.box_dynamic[b] = false;
+      if (!still_person[b]) continue;
+      res.box_dynamic[b] = false;
+      tracks_[box_track[b]].last_used_frame = in.frame_index;
     }
     classify();
     res.still_people_released = true;
   }
+  // After the release: box_track indexes tracks_.
+  std::erase_if(tracks_, [&](const BoxTrack& t) {
+    return in.frame_index > t.last_seen_frame + static_cast<std::size_t>(std::max(cfg_.dynamic_hold_frames,
+                                                                                  cfg_.max_history_frames));
+  });
   res.ms = sw.elapsed_ms();
   return res;
 }

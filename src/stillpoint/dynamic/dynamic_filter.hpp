@@ -94,6 +94,13 @@ struct MotionCheckConfig {
   bool joint_fit_still = true;
   double joint_fit_max_change_m = 0.03;   // m, the refit's translation from the first fit's at most [0, 1]
   double joint_fit_max_change_deg = 0.6;  // deg, its rotation from the first fit's at most [0, 45]
+  // A person in use (proven still and kept by the fallback in the frame before) is also checked against
+  // the image this many frames back: flow chained through the stored images, the camera motion fitted
+  // on the background over that span, then the same joint refit and bounds. A person who starts to
+  // walk moves a few millimetres per frame at first, which the one-frame refit's slack absorbs, but
+  // the steps add up over the span while the fit's error does not (room209_walking_halfsphere,
+  // docs/dynamic.md) [0, 30]; 0 or 1 = off.
+  int used_person_baseline_frames = 0;
   // The moving share of a box is counted over the points at the object's depth only, so background
   // seen through a loose box does not outvote the person [true]; false = over all points in the box.
   bool ratio_at_object_depth = true;
@@ -197,6 +204,12 @@ class DynamicFeatureFilter {
     std::optional<std::size_t> last_dynamic_frame;  // last frame the motion check saw it move
     std::optional<std::size_t> last_culled_frame;   // last frame its box was culled (for any reason)
     int static_streak = 0;                          // consecutive frames the motion check saw it still
+    std::optional<std::size_t> last_used_frame;     // last frame it was proven still and kept (in use)
+  };
+  struct StoredFrame {  // one frame's LK pyramid and camera motion, for used_person_baseline_frames
+    std::size_t frame_index = 0;
+    std::vector<cv::Mat> pyramid;
+    std::optional<CameraMotion> motion;  // to the frame before, when the reprojection fit ran
   };
 
   std::vector<Detection> carry_boxes(const Detections& d, std::size_t to_frame) const;
@@ -218,9 +231,16 @@ class DynamicFeatureFilter {
   // (the camera fit's inliers) and `object` (a box's points) together, keeps both groups within the
   // reprojection threshold (moving share below moving_ratio_threshold in each). Points without depth
   // are left out.
-  bool explained_by_camera(const DynamicInput& in, const DynamicResult& res, const EgoFit& ego,
+  bool explained_by_camera(const Eigen::Matrix3d& K, const CameraMotion& motion, const EgoFit& ego,
+                           const std::vector<cv::Point2f>& prev_px,
                            const std::vector<std::size_t>& background,
                            const std::vector<std::size_t>& object) const;
+  // used_person_baseline_frames: whether the tracked points `object` moved against `background` (the
+  // camera fit's inliers) since the oldest stored frame, judged as one frame step is (camera fit on the
+  // background, then the joint refit). nullopt: too few stored frames or points to judge.
+  std::optional<bool> moved_over_baseline(const DynamicInput& in, const DynamicResult& res, const EgoFit& ego,
+                                          const std::vector<std::size_t>& background,
+                                          const std::vector<std::size_t>& object) const;
   // Epipolar distance to an F fitted by RANSAC, or the homography transfer error when a homography
   // explains the motion as well (static or rotating camera, far scene: F is degenerate there).
   void epipolar_residuals(const std::vector<int>& fit, DynamicResult& res, std::vector<float>& eps) const;
@@ -235,6 +255,7 @@ class DynamicFeatureFilter {
   std::vector<BoxTrack> tracks_;
   cv::Mat cached_gray_;  // last current image and its LK pyramid, reused as "previous"
   std::vector<cv::Mat> cached_pyr_;
+  std::deque<StoredFrame> stored_;  // the newest used_person_baseline_frames + 1 frames, consecutive
 };
 
 }  // namespace sp::dyn

@@ -8,6 +8,7 @@
 #include <limits>
 #include <opencv2/calib3d.hpp>
 #include <opencv2/core/eigen.hpp>
+#include <opencv2/video/tracking.hpp>
 
 #include "stillpoint/dynamic/depth_lookup.hpp"
 #include "stillpoint/dynamic/dynamic_filter.hpp"
@@ -306,8 +307,9 @@ bool DynamicFeatureFilter::reprojection_residuals(const DynamicInput& in, const 
   return true;
 }
 
-bool DynamicFeatureFilter::explained_by_camera(const DynamicInput& in, const DynamicResult& res,
-                                               const EgoFit& ego, const std::vector<std::size_t>& background,
+bool DynamicFeatureFilter::explained_by_camera(const Eigen::Matrix3d& Ke, const CameraMotion& motion,
+                                               const EgoFit& ego, const std::vector<cv::Point2f>& prev_px,
+                                               const std::vector<std::size_t>& background,
                                                const std::vector<std::size_t>& object) const {
   MotionFitPoints pts;
   std::vector<int> group;  // 0 background, 1 object
@@ -315,15 +317,15 @@ bool DynamicFeatureFilter::explained_by_camera(const DynamicInput& in, const Dyn
     for (std::size_t i : *idx) {
       if (!ego.has_z[i]) continue;
       pts.cur_3d.push_back(ego.X[i]);
-      pts.prev_px.push_back(res.flow_prev[i]);
+      pts.prev_px.push_back(prev_px[i]);
       group.push_back(g);
     }
   }
   if (pts.cur_3d.size() < 8) return false;  // as the first fit needs
   cv::Matx33d K;
-  cv::eigen2cv(*in.K, K);
-  cv::Mat rvec, tvec = cv::Mat(ego.motion.t, true);
-  cv::Rodrigues(cv::Mat(ego.motion.R), rvec);
+  cv::eigen2cv(Ke, K);
+  cv::Mat rvec, tvec = cv::Mat(motion.t, true);
+  cv::Rodrigues(cv::Mat(motion.R), rvec);
   const auto R = [&] {
     cv::Mat Rm;
     cv::Rodrigues(rvec, Rm);
@@ -348,9 +350,9 @@ bool DynamicFeatureFilter::explained_by_camera(const DynamicInput& in, const Dyn
   }
   // Only a small correction of the first fit counts: two depth layers are explained exactly by some
   // rotation and translation together, a person walking in front of a wall included.
-  const cv::Matx33d dR = R() * ego.motion.R.t();
+  const cv::Matx33d dR = R() * motion.R.t();
   const double dang = std::acos(std::clamp((cv::trace(dR) - 1.0) / 2.0, -1.0, 1.0)) * 180.0 / M_PI;
-  if (cv::norm(t() - ego.motion.t) > cfg_.joint_fit_max_change_m || dang > cfg_.joint_fit_max_change_deg)
+  if (cv::norm(t() - motion.t) > cfg_.joint_fit_max_change_m || dang > cfg_.joint_fit_max_change_deg)
     return false;
   squared_residuals(pts, K, R(), t(), r2);
   std::array<int, 2> total{0, 0}, moving{0, 0};
@@ -363,6 +365,95 @@ bool DynamicFeatureFilter::explained_by_camera(const DynamicInput& in, const Dyn
       return false;
   }
   return true;
+}
+
+std::optional<bool> DynamicFeatureFilter::moved_over_baseline(const DynamicInput& in,
+                                                              const DynamicResult& res, const EgoFit& ego,
+                                                              const std::vector<std::size_t>& background,
+                                                              const std::vector<std::size_t>& object) const {
+  // The stored frames end at this one and are consecutive; the span is as long as they reach.
+  if (stored_.size() < 3 || stored_.back().frame_index != in.frame_index) return std::nullopt;
+  std::vector<std::size_t> idx;  // background first, then the object
+  for (const auto* group : {&background, &object}) {
+    for (std::size_t i : *group) {
+      if (ego.has_z[i]) idx.push_back(i);
+    }
+  }
+  // Follow the points back from the previous frame (their flow is known) to the oldest stored one,
+  // one frame step at a time: a small motion per step keeps LK in its basin.
+  std::vector<cv::Point2f> pos;
+  for (std::size_t i : idx) pos.push_back(res.flow_prev[i]);
+  std::vector<bool> alive(idx.size(), true);
+  const cv::Size win(cfg_.lk_window, cfg_.lk_window);
+  const cv::TermCriteria term(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 20, 0.03);
+  std::vector<cv::Point2f> next;
+  std::vector<uchar> st;
+  std::vector<float> err;
+  const cv::Size image = stored_.back().pyramid.front().size();
+  const cv::Rect2f bounds(0.f, 0.f, static_cast<float>(image.width), static_cast<float>(image.height));
+  // x_oldest = R x_cur + t, chained from the per-frame camera fits (the guess of the span's fit).
+  std::optional<CameraMotion> chained = stored_.back().motion;
+  for (std::size_t s = stored_.size() - 1; s-- > 1;) {
+    const StoredFrame& from = stored_[s];
+    const StoredFrame& to = stored_[s - 1];
+    next = pos;
+    cv::calcOpticalFlowPyrLK(from.pyramid, to.pyramid, pos, next, st, err, win, cfg_.lk_levels, term,
+                             cv::OPTFLOW_USE_INITIAL_FLOW);
+    for (std::size_t k = 0; k < idx.size(); ++k) alive[k] = alive[k] && st[k] && bounds.contains(next[k]);
+    pos.swap(next);
+    if (chained && from.motion) {
+      chained->t = from.motion->R * chained->t + from.motion->t;
+      chained->R = from.motion->R * chained->R;
+    } else {
+      chained.reset();
+    }
+  }
+  // The span's camera motion, fitted on the background as the one-step fit is.
+  std::vector<cv::Point2f> oldest_px(res.flow_prev.size());
+  MotionFitPoints pts;
+  std::vector<std::size_t> bg_alive, obj_alive;
+  std::size_t n_bg = 0;  // idx holds the background's points first
+  for (std::size_t i : background) n_bg += ego.has_z[i] ? 1 : 0;
+  for (std::size_t k = 0; k < idx.size(); ++k) {
+    if (!alive[k]) continue;
+    oldest_px[idx[k]] = pos[k];
+    if (k < n_bg) {
+      bg_alive.push_back(idx[k]);
+      pts.cur_3d.push_back(ego.X[idx[k]]);
+      pts.prev_px.push_back(pos[k]);
+    } else {
+      obj_alive.push_back(idx[k]);
+    }
+  }
+  if (pts.cur_3d.size() < 8 || static_cast<int>(obj_alive.size()) < cfg_.min_points_to_decide)
+    return std::nullopt;
+  cv::Matx33d K;
+  cv::eigen2cv(*in.K, K);
+  MsacOptions opt;
+  opt.threshold_px =
+      cfg_.ego_fit_threshold_px > 0.0 ? cfg_.ego_fit_threshold_px : cfg_.epsilon_reprojection_px;
+  opt.flat_threshold_px = opt.threshold_px;
+  opt.iterations = cfg_.ransac_iterations;
+  const std::optional<CameraMotion> m = fit_camera_motion_msac(pts, K, chained, opt);
+  if (!m || m->inliers < std::max(6.0, 0.3 * static_cast<double>(pts.cur_3d.size()))) return std::nullopt;
+  // Under the background's motion: the object's moving share, then the joint refit, as for one step.
+  const double eps2 = cfg_.epsilon_reprojection_px * cfg_.epsilon_reprojection_px;
+  MotionFitPoints obj;
+  for (std::size_t i : obj_alive) {
+    obj.cur_3d.push_back(ego.X[i]);
+    obj.prev_px.push_back(oldest_px[i]);
+  }
+  std::vector<double> r2;
+  squared_residuals(obj, K, m->R, m->t, r2);
+  const auto obj_moving = std::count_if(r2.begin(), r2.end(), [&](double v) { return v > eps2; });
+  if (static_cast<double>(obj_moving) < cfg_.moving_ratio_threshold * static_cast<double>(r2.size()))
+    return false;
+  squared_residuals(pts, K, m->R, m->t, r2);
+  std::vector<std::size_t> bg_inliers;
+  for (std::size_t k = 0; k < bg_alive.size(); ++k) {
+    if (r2[k] <= eps2) bg_inliers.push_back(bg_alive[k]);
+  }
+  return !explained_by_camera(*in.K, *m, ego, oldest_px, bg_inliers, obj_alive);
 }
 
 void DynamicFeatureFilter::depthless_homography_residuals(const std::vector<int>& fit,
