@@ -273,11 +273,18 @@ bool LocalMapper::local_bundle_adjustment(map::KeyframeId kid, const std::atomic
     const auto& o = problem.observations[i];
     view.erase_observation(map::PointId{o.point_id}, map::KeyframeId{o.keyframe_id});
   }
+  double largest_move_m = 0.0;  // for the debug log: how far BA moved a keyframe's centre
+  std::uint64_t moved_most = 0;
   for (const auto& k : problem.keyframes) {
     if (k.fixed) continue;
-    if (map::Keyframe* kf = view.keyframe(map::KeyframeId{k.id}); kf != nullptr && !kf->bad)
+    if (map::Keyframe* kf = view.keyframe(map::KeyframeId{k.id}); kf != nullptr && !kf->bad) {
+      const double move = (kf->T_cw.inverse().translation() - k.T_cw.inverse().translation()).norm();
+      if (move > largest_move_m) largest_move_m = move, moved_most = k.id;
       kf->T_cw = k.T_cw;
+    }
   }
+  spdlog::debug("local BA at keyframe {}: {} keyframes, {} points; keyframe {} moved most, {:.1f} cm", kid,
+                problem.keyframes.size(), problem.points.size(), moved_most, 100.0 * largest_move_m);
   for (const auto& p : problem.points) {
     const map::PointId pid{p.id};
     map::MapPoint* mp = view.point(pid);
