@@ -180,5 +180,34 @@ TEST_F(LocalMapperTest, TriangulatesFeaturesWithoutDepthAtTheirTruePositions) {
   EXPECT_EQ(checked, s.triangulated_points);
 }
 
+// A local BA that would carry a keyframe further than ba_max_keyframe_move_m is dropped: keyframe 2 is
+// stored 6 cm from where it saw the scene (its views are exact), so BA moves it back 6 cm. With the
+// bound at 3 cm nothing changes; without it, BA puts the keyframe where it was.
+TEST_F(LocalMapperTest, ALocalBAThatMovesAKeyframeTooFarIsDropped) {
+  const auto scene = testing::make_slab_scene(600, 1.5, 1.0, 1.5, 3.0, 21);
+  for (const double bound : {0.03, 0.0, 0.1}) {
+    map::Map map;  // a fresh one per bound
+    testing::SyntheticMapBuilder builder(map, scene, cam_, depth_.bf, 100);
+    builder.add(at(0.0), at(0.0));
+    builder.add(at(0.01), at(0.07));
+    builder.finish(pyramid_);
+    LocalMappingConfig c;
+    c.ba_max_keyframe_move_m = bound;
+    c.cull_keyframes = false;
+    c.triangulation.enabled = false;
+    LocalMapper mapper(map, c, cam_, depth_, pyramid_);
+    const LocalMappingStats s = mapper.process(builder.keyframes()[1]);
+    map::MapView view = map.view();
+    const double x = view.keyframe(builder.keyframes()[1])->T_cw.inverse().translation().x();
+    const bool dropped = bound > 0.0 && bound < 0.06;
+    EXPECT_EQ(s.ba_dropped, dropped) << "bound " << bound;
+    if (dropped) {
+      EXPECT_DOUBLE_EQ(x, 0.07) << "bound " << bound;
+    } else {
+      EXPECT_NEAR(x, 0.01, 0.005) << "bound " << bound;
+    }
+  }
+}
+
 }  // namespace
 }  // namespace sp::mapping

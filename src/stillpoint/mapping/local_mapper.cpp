@@ -19,6 +19,7 @@ LocalMappingConfig LocalMappingConfig::from_yaml(const ConfigReader& r) {
   r.read("fusion_radius", c.fusion_radius, 0.5, 50.0);
   r.read("local_ba", c.local_ba);
   r.read("ba_max_keyframes", c.ba_max_keyframes, std::size_t{2}, std::size_t{200});
+  r.read("ba_max_keyframe_move_m", c.ba_max_keyframe_move_m, 0.0, 10.0);
   r.read("redundancy", c.redundancy, 0.5, 1.0);
   r.read("cull_keyframes", c.cull_keyframes);
   r.read("min_found_ratio", c.min_found_ratio, 0.0, 1.0);
@@ -268,23 +269,30 @@ bool LocalMapper::local_bundle_adjustment(map::KeyframeId kid, const std::atomic
 
   map::MapView view = map_.view();
   if (map_.big_change_count() != changes_before) return false;
+  double largest_move_m = 0.0;  // how far BA moved a keyframe's centre
+  std::uint64_t moved_most = 0;
+  for (const auto& k : problem.keyframes) {
+    const map::Keyframe* kf = k.fixed ? nullptr : view.keyframe(map::KeyframeId{k.id});
+    if (kf == nullptr || kf->bad) continue;
+    const double move = (kf->T_cw.inverse().translation() - k.T_cw.inverse().translation()).norm();
+    if (move > largest_move_m) largest_move_m = move, moved_most = k.id;
+  }
+  spdlog::debug("local BA at keyframe {}: {} keyframes, {} points; keyframe {} moved most, {:.1f} cm", kid,
+                problem.keyframes.size(), problem.points.size(), moved_most, 100.0 * largest_move_m);
+  if (config_.ba_max_keyframe_move_m > 0.0 && largest_move_m > config_.ba_max_keyframe_move_m) {
+    stats.ba_dropped = true;
+    return false;
+  }
   for (std::size_t i = 0; i < problem.observations.size(); ++i) {
     if (!result.outlier[i]) continue;
     const auto& o = problem.observations[i];
     view.erase_observation(map::PointId{o.point_id}, map::KeyframeId{o.keyframe_id});
   }
-  double largest_move_m = 0.0;  // for the debug log: how far BA moved a keyframe's centre
-  std::uint64_t moved_most = 0;
   for (const auto& k : problem.keyframes) {
     if (k.fixed) continue;
-    if (map::Keyframe* kf = view.keyframe(map::KeyframeId{k.id}); kf != nullptr && !kf->bad) {
-      const double move = (kf->T_cw.inverse().translation() - k.T_cw.inverse().translation()).norm();
-      if (move > largest_move_m) largest_move_m = move, moved_most = k.id;
+    if (map::Keyframe* kf = view.keyframe(map::KeyframeId{k.id}); kf != nullptr && !kf->bad)
       kf->T_cw = k.T_cw;
-    }
   }
-  spdlog::debug("local BA at keyframe {}: {} keyframes, {} points; keyframe {} moved most, {:.1f} cm", kid,
-                problem.keyframes.size(), problem.points.size(), moved_most, 100.0 * largest_move_m);
   for (const auto& p : problem.points) {
     const map::PointId pid{p.id};
     map::MapPoint* mp = view.point(pid);

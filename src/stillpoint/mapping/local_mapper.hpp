@@ -19,7 +19,12 @@ struct LocalMappingConfig {
   double fusion_radius = 3.0;          // px at level 0
   bool local_ba = true;
   std::size_t ba_max_keyframes = 20;  // optimised keyframes (the rest that see the points stay fixed)
-  double redundancy = 0.9;            // share of a keyframe's points seen by 3 others -> culled
+  // A local BA that moves a keyframe's centre further than this is dropped (poses, points and outlier
+  // marks stay as they were): an ill-posed window, e.g. a person filling most of the view, can carry
+  // the newest keyframe centimetres from where tracking put it (docs/tracking_precision.md) [0, 10];
+  // 0 = off.
+  double ba_max_keyframe_move_m = 0.0;
+  double redundancy = 0.9;  // share of a keyframe's points seen by 3 others -> culled
   bool cull_keyframes = true;
   double min_found_ratio = 0.25;  // new points matched less often than this are dropped
   // New points with fewer weighted observations (a view with depth counts 2) two keyframes after
@@ -42,6 +47,7 @@ struct LocalMappingStats {
   int culled_keyframes = 0;
   std::size_t purged_records = 0;
   bool ba_aborted = false;
+  bool ba_dropped = false;  // the BA moved a keyframe more than ba_max_keyframe_move_m: not applied
 };
 
 class LocalMapper {
