@@ -469,8 +469,11 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
       if (!track_used[t] && tracks_[t].class_id == det.class_id && o > best_iou) best_iou = o, match = t;
     }
     if (match == tracks_.size()) {
-      tracks_.push_back(
-          {det.box, det.class_id, in.frame_index, in.frame_index, std::nullopt, 0, 0, std::nullopt});
+      BoxTrack fresh;
+      fresh.box = det.box;
+      fresh.class_id = det.class_id;
+      fresh.last_seen_frame = fresh.last_detected_frame = in.frame_index;
+      tracks_.push_back(fresh);
       track_used.push_back(false);
     }
     track_used[match] = true;
