@@ -360,7 +360,7 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
   res.flow_residual.assign(n, -1.f);
   std::vector<bool> moving(n, false);
   std::optional<EgoFit> ego;                 // the motion the reprojection residuals were computed under
-  std::vector<std::size_t> ego_fit_inliers;  // joint_fit_still: the fitted points that came out static
+  std::vector<std::size_t> ego_fit_inliers;  // the fitted points that came out static (joint / span checks)
   if (n >= 8) {
     std::vector<int> fit;  // static candidates: outside the boxes
     for (std::size_t i = 0; i < n; ++i) {

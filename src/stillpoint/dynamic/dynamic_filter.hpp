@@ -222,6 +222,10 @@ class DynamicFeatureFilter {
     std::vector<cv::Point3f> X;
     std::vector<bool> has_z;
   };
+  // The MSAC settings of every camera-motion fit, and whether a fit on `points` points with depth has
+  // enough inliers to be trusted (else the prediction is kept).
+  MsacOptions msac_options() const;
+  static bool enough_inliers(int inliers, std::size_t points);
   // Fill res.flow_residual and eps (per-point threshold) from the points `fit` (static candidates).
   // Reprojection: camera motion by PnP-RANSAC on depth; false when it cannot be estimated. `ego` (may
   // be null) receives the motion and the back-projected points.

@@ -200,6 +200,21 @@ std::optional<CameraMotion> fit_camera_motion_msac(const MotionFitPoints& pts, c
   return m;
 }
 
+MsacOptions DynamicFeatureFilter::msac_options() const {
+  MsacOptions opt;
+  opt.threshold_px =
+      cfg_.ego_fit_threshold_px > 0.0 ? cfg_.ego_fit_threshold_px : cfg_.epsilon_reprojection_px;
+  opt.flat_threshold_px = cfg_.ego_fit_threshold_px > 0.0
+                              ? std::min(cfg_.ego_fit_threshold_px, cfg_.epsilon_epipolar_px)
+                              : cfg_.epsilon_epipolar_px;
+  opt.iterations = cfg_.ransac_iterations;
+  return opt;
+}
+
+bool DynamicFeatureFilter::enough_inliers(int inliers, std::size_t points) {
+  return static_cast<double>(inliers) >= std::max(6.0, 0.3 * static_cast<double>(points));
+}
+
 bool DynamicFeatureFilter::reprojection_residuals(const DynamicInput& in, const std::vector<int>& fit,
                                                   DynamicResult& res, std::vector<float>& eps,
                                                   EgoFit* ego) const {
@@ -248,16 +263,9 @@ bool DynamicFeatureFilter::reprojection_residuals(const DynamicInput& in, const 
   if (obj.size() >= 8) {
     int n_inliers = 0;
     if (cfg_.ego_fit == "msac") {
-      MsacOptions opt;
-      opt.threshold_px =
-          cfg_.ego_fit_threshold_px > 0.0 ? cfg_.ego_fit_threshold_px : cfg_.epsilon_reprojection_px;
-      opt.flat_threshold_px = cfg_.ego_fit_threshold_px > 0.0
-                                  ? std::min(cfg_.ego_fit_threshold_px, cfg_.epsilon_epipolar_px)
-                                  : cfg_.epsilon_epipolar_px;
-      opt.iterations = cfg_.ransac_iterations;
       std::optional<CameraMotion> g;
       if (guess) g = CameraMotion{rotation_of(rvec), vec_of(tvec), 0};
-      const std::optional<CameraMotion> m = fit_camera_motion_msac(pts, cv::Matx33d(Kcv), g, opt);
+      const std::optional<CameraMotion> m = fit_camera_motion_msac(pts, cv::Matx33d(Kcv), g, msac_options());
       ok = m.has_value();
       if (ok) {
         cv::Rodrigues(cv::Mat(m->R), rvec);
@@ -271,7 +279,7 @@ bool DynamicFeatureFilter::reprojection_residuals(const DynamicInput& in, const 
                               inliers, cv::SOLVEPNP_ITERATIVE);
       n_inliers = static_cast<int>(inliers.size());
     }
-    ok = ok && static_cast<double>(n_inliers) >= std::max(6.0, 0.3 * static_cast<double>(obj.size()));
+    ok = ok && enough_inliers(n_inliers, obj.size());
     res.ego_inliers = ok ? n_inliers : 0;
     if (!ok && guess) {  // keep the prediction, not what a failed RANSAC left behind
       const Eigen::Isometry3d T = in.T_cur_prev_predicted->inverse();
@@ -429,13 +437,8 @@ std::optional<bool> DynamicFeatureFilter::moved_over_baseline(const DynamicInput
     return std::nullopt;
   cv::Matx33d K;
   cv::eigen2cv(*in.K, K);
-  MsacOptions opt;
-  opt.threshold_px =
-      cfg_.ego_fit_threshold_px > 0.0 ? cfg_.ego_fit_threshold_px : cfg_.epsilon_reprojection_px;
-  opt.flat_threshold_px = opt.threshold_px;
-  opt.iterations = cfg_.ransac_iterations;
-  const std::optional<CameraMotion> m = fit_camera_motion_msac(pts, K, chained, opt);
-  if (!m || m->inliers < std::max(6.0, 0.3 * static_cast<double>(pts.cur_3d.size()))) return std::nullopt;
+  const std::optional<CameraMotion> m = fit_camera_motion_msac(pts, K, chained, msac_options());
+  if (!m || !enough_inliers(m->inliers, pts.cur_3d.size())) return std::nullopt;
   // Under the background's motion: the object's moving share, then the joint refit, as for one step.
   const double eps2 = cfg_.epsilon_reprojection_px * cfg_.epsilon_reprojection_px;
   MotionFitPoints obj;

@@ -261,21 +261,20 @@ bool LocalMapper::local_bundle_adjustment(map::KeyframeId kid, const std::atomic
   if (problem.keyframes.size() < 2) return false;
   // A loop correction while BA runs makes its result stale: then it is dropped.
   const std::uint64_t changes_before = map_.big_change_count();
+  std::vector<Eigen::Vector3d> centres_before;  // where each keyframe was before BA, for its largest move
+  centres_before.reserve(problem.keyframes.size());
+  for (const auto& k : problem.keyframes) centres_before.push_back(k.T_cw.inverse().translation());
   Stopwatch watch;
   const opt::BAResult result = opt::run_bundle_adjustment(problem, camera_model_, config_.ba, abort);
   stats.ba_ms = watch.elapsed_ms();
   stats.ba_aborted = result.aborted;
   if (result.aborted) return false;
-
-  map::MapView view = map_.view();
-  if (map_.big_change_count() != changes_before) return false;
-  double largest_move_m = 0.0;  // how far BA moved a keyframe's centre
+  // Outside the map lock: how far BA carried a keyframe (fixed ones stay put).
+  double largest_move_m = 0.0;
   std::uint64_t moved_most = 0;
-  for (const auto& k : problem.keyframes) {
-    const map::Keyframe* kf = k.fixed ? nullptr : view.keyframe(map::KeyframeId{k.id});
-    if (kf == nullptr || kf->bad) continue;
-    const double move = (kf->T_cw.inverse().translation() - k.T_cw.inverse().translation()).norm();
-    if (move > largest_move_m) largest_move_m = move, moved_most = k.id;
+  for (std::size_t i = 0; i < problem.keyframes.size(); ++i) {
+    const double move = (problem.keyframes[i].T_cw.inverse().translation() - centres_before[i]).norm();
+    if (move > largest_move_m) largest_move_m = move, moved_most = problem.keyframes[i].id;
   }
   spdlog::debug("local BA at keyframe {}: {} keyframes, {} points; keyframe {} moved most, {:.1f} cm", kid,
                 problem.keyframes.size(), problem.points.size(), moved_most, 100.0 * largest_move_m);
@@ -283,6 +282,9 @@ bool LocalMapper::local_bundle_adjustment(map::KeyframeId kid, const std::atomic
     stats.ba_dropped = true;
     return false;
   }
+
+  map::MapView view = map_.view();
+  if (map_.big_change_count() != changes_before) return false;
   for (std::size_t i = 0; i < problem.observations.size(); ++i) {
     if (!result.outlier[i]) continue;
     const auto& o = problem.observations[i];
