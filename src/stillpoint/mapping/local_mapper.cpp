@@ -276,6 +276,8 @@ bool LocalMapper::local_bundle_adjustment(map::KeyframeId kid, const std::atomic
     const double move = (problem.keyframes[i].T_cw.inverse().translation() - centres_before[i]).norm();
     if (move > largest_move_m) largest_move_m = move, moved_most = problem.keyframes[i].id;
   }
+  stats.ba_solved = true;
+  stats.ba_largest_keyframe_move_m = largest_move_m;
   spdlog::debug("local BA at keyframe {}: {} keyframes, {} points; keyframe {} moved most, {:.1f} cm", kid,
                 problem.keyframes.size(), problem.points.size(), moved_most, 100.0 * largest_move_m);
   if (config_.ba_max_keyframe_move_m > 0.0 && largest_move_m > config_.ba_max_keyframe_move_m) {

@@ -48,6 +48,8 @@ struct LocalMappingStats {
   std::size_t purged_records = 0;
   bool ba_aborted = false;
   bool ba_dropped = false;  // the BA moved a keyframe more than ba_max_keyframe_move_m: not applied
+  bool ba_solved = false;   // a BA ran to the end (applied or dropped)
+  double ba_largest_keyframe_move_m = 0;  // how far the solved BA carried its most-moved keyframe centre
 };
 
 class LocalMapper {

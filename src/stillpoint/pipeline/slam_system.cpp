@@ -478,6 +478,16 @@ nlohmann::json SlamSystem::statistics() {
                      {"keyframes_vetoed", tracker_.guard_stats().keyframes_vetoed},
                      {"keyframes_despite_jump", tracker_.guard_stats().keyframes_despite_jump}};
   j["motion_breaks"] = tracker_.motion_breaks();
+  {
+    const LocalBASummary ba = mapping_stage_->ba_summary();
+    j["local_ba"] = {{"solved", ba.solved},
+                     {"aborted", ba.aborted},
+                     {"dropped", ba.dropped},
+                     {"largest_keyframe_move_cm", 100.0 * ba.largest_keyframe_move_m},
+                     {"moves_over_1cm", ba.moves_over_1cm},
+                     {"moves_over_3cm", ba.moves_over_3cm},
+                     {"moves_over_10cm", ba.moves_over_10cm}};
+  }
   j["new_points_moving"] = tracker_.new_points_moving();
   j["subpixel"] = {{"enabled", config_.tracker.subpixel.enabled},
                    {"frames", tracker_.subpixel_stats().frames},
