@@ -212,5 +212,39 @@ TEST_F(LocalMapperTest, ALocalBAThatMovesAKeyframeTooFarIsDropped) {
   }
 }
 
+TEST_F(LocalMapperTest, AKeyframeWhoseSharedPointsCrowdIntoAPatchKeepsItsTrackedPose) {
+  // Keyframe 1 starts 6 cm from where it was: BA refines it back unless its shared points, all in a
+  // small patch of the image, leave its centre loosely pinned; then the weak-keyframe rule holds it.
+  struct Case {
+    double half_width;  // m, of the slab of points 1.5-3 m away
+    double bound;       // m, ba_weak_keyframe_std_m
+    bool held;
+  };
+  for (const Case c : {Case{1.5, 0.01, false}, Case{0.04, 0.01, true}, Case{0.04, 0.0, false}}) {
+    const auto scene = testing::make_slab_scene(300, c.half_width, c.half_width, 1.5, 3.0, 5);
+    map::Map map;
+    testing::SyntheticMapBuilder builder(map, scene, cam_, depth_.bf, 100);
+    builder.add(at(0.0), at(0.0));
+    builder.add(at(0.01), at(0.07));
+    builder.finish(pyramid_);
+    LocalMappingConfig config;
+    config.ba_weak_keyframe_std_m = c.bound;
+    config.cull_keyframes = false;
+    config.triangulation.enabled = false;
+    LocalMapper mapper(map, config, cam_, depth_, pyramid_);
+    const LocalMappingStats s = mapper.process(builder.keyframes()[1]);
+    map::MapView view = map.view();
+    const double x = view.keyframe(builder.keyframes()[1])->T_cw.inverse().translation().x();
+    const std::string label =
+        "half width " + std::to_string(c.half_width) + ", bound " + std::to_string(c.bound);
+    EXPECT_EQ(s.ba_held_keyframes, c.held ? 1 : 0) << label;
+    if (c.held) {
+      EXPECT_DOUBLE_EQ(x, 0.07) << label;
+    } else {
+      EXPECT_NEAR(x, 0.01, 0.005) << label;
+    }
+  }
+}
+
 }  // namespace
 }  // namespace sp::mapping

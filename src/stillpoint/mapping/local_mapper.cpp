@@ -9,6 +9,7 @@
 #include <unordered_set>
 
 #include "stillpoint/common/timing.hpp"
+#include "stillpoint/optimize/ba_conditioning.hpp"
 #include "stillpoint/tracking/projection_matcher.hpp"
 
 namespace sp::mapping {
@@ -20,6 +21,7 @@ LocalMappingConfig LocalMappingConfig::from_yaml(const ConfigReader& r) {
   r.read("local_ba", c.local_ba);
   r.read("ba_max_keyframes", c.ba_max_keyframes, std::size_t{2}, std::size_t{200});
   r.read("ba_max_keyframe_move_m", c.ba_max_keyframe_move_m, 0.0, 10.0);
+  r.read("ba_weak_keyframe_std_m", c.ba_weak_keyframe_std_m, 0.0, 10.0);
   r.read("redundancy", c.redundancy, 0.5, 1.0);
   r.read("cull_keyframes", c.cull_keyframes);
   r.read("min_found_ratio", c.min_found_ratio, 0.0, 1.0);
@@ -259,6 +261,16 @@ bool LocalMapper::local_bundle_adjustment(map::KeyframeId kid, const std::atomic
     }
   }
   if (problem.keyframes.size() < 2) return false;
+  if (config_.ba_weak_keyframe_std_m > 0.0) {
+    const std::vector<double> centre_std = opt::keyframe_centre_std(problem, camera_model_);
+    for (std::size_t i = 0; i < problem.keyframes.size(); ++i) {
+      if (problem.keyframes[i].fixed || centre_std[i] <= config_.ba_weak_keyframe_std_m) continue;
+      problem.keyframes[i].fixed = true;
+      ++stats.ba_held_keyframes;
+      spdlog::debug("local BA at keyframe {}: keyframe {} held at its pose (centre std {:.1f} cm)", kid,
+                    problem.keyframes[i].id, 100.0 * centre_std[i]);
+    }
+  }
   // A loop correction while BA runs makes its result stale: then it is dropped.
   const std::uint64_t changes_before = map_.big_change_count();
   std::vector<Eigen::Vector3d> centres_before;  // where each keyframe was before BA, for its largest move

@@ -24,6 +24,11 @@ struct LocalMappingConfig {
   // the newest keyframe centimetres from where tracking put it (docs/tracking_precision.md) [0, 10];
   // 0 = off.
   double ba_max_keyframe_move_m = 0.0;
+  // A free keyframe whose camera centre the window pins down worse than this (standard deviation from
+  // the points it shares, 1 px level-0 noise; opt::keyframe_centre_std) keeps its tracked pose: it is
+  // held fixed in that BA, the points and the other keyframes are still refined. Acts on the cause the
+  // move bound above sees afterwards (docs/tracking_precision.md) [0, 10]; 0 = off.
+  double ba_weak_keyframe_std_m = 0.0;
   double redundancy = 0.9;  // share of a keyframe's points seen by 3 others -> culled
   bool cull_keyframes = true;
   double min_found_ratio = 0.25;  // new points matched less often than this are dropped
@@ -47,8 +52,9 @@ struct LocalMappingStats {
   int culled_keyframes = 0;
   std::size_t purged_records = 0;
   bool ba_aborted = false;
-  bool ba_dropped = false;  // the BA moved a keyframe more than ba_max_keyframe_move_m: not applied
-  bool ba_solved = false;   // a BA ran to the end (applied or dropped)
+  bool ba_dropped = false;    // the BA moved a keyframe more than ba_max_keyframe_move_m: not applied
+  int ba_held_keyframes = 0;  // free keyframes held fixed as weakly constrained (ba_weak_keyframe_std_m)
+  bool ba_solved = false;     // a BA ran to the end (applied or dropped)
   double ba_largest_keyframe_move_m = 0;  // how far the solved BA carried its most-moved keyframe centre
 };
 

@@ -17,6 +17,7 @@ struct LocalBASummary {
   std::size_t solved = 0;
   std::size_t aborted = 0;
   std::size_t dropped = 0;
+  std::size_t held_keyframes = 0;  // weakly constrained keyframes held at their poses
   double largest_keyframe_move_m = 0;
   std::size_t moves_over_1cm = 0;
   std::size_t moves_over_3cm = 0;
@@ -25,6 +26,7 @@ struct LocalBASummary {
   void add(const mapping::LocalMappingStats& s) {
     if (s.ba_aborted) ++aborted;
     if (s.ba_dropped) ++dropped;
+    held_keyframes += static_cast<std::size_t>(s.ba_held_keyframes);
     if (!s.ba_solved) return;
     ++solved;
     largest_keyframe_move_m = std::max(largest_keyframe_move_m, s.ba_largest_keyframe_move_m);

@@ -483,6 +483,7 @@ nlohmann::json SlamSystem::statistics() {
     j["local_ba"] = {{"solved", ba.solved},
                      {"aborted", ba.aborted},
                      {"dropped", ba.dropped},
+                     {"held_keyframes", ba.held_keyframes},
                      {"largest_keyframe_move_cm", 100.0 * ba.largest_keyframe_move_m},
                      {"moves_over_1cm", ba.moves_over_1cm},
                      {"moves_over_3cm", ba.moves_over_3cm},
