@@ -33,8 +33,10 @@ tune_seeds="101 102 103 104 105 106 107 108"
 # 269-272 rendered at the end of session 34, used in session 35 to measure the shipped defaults (its four
 # candidates failed their screens, "Session 35"); 273-276 rendered in session 35, used in session 36 to judge
 # the joint camera fit with the coverage fallback ("Session 36"); 277-280 rendered in session 36, used in
-# session 37 to judge a bound on local BA's keyframe moves and to measure the shipped defaults ("Session 37").
-heldout_seeds="201 202 203 204 205 206 207 208 209 210 211 212 213 214 215 216 217 218 219 220 221 222 223 224 225 226 227 228 229 230 231 232 233 234 235 236 237 238 239 240 241 242 243 244 245 246 247 248 249 250 251 252 253 254 255 256 257 258 259 260 261 262 263 264 265 266 267 268 269 270 271 272 273 274 275 276 277 278 279 280"
+# session 37 to judge a bound on local BA's keyframe moves and to measure the shipped defaults ("Session 37");
+# 281-308 in session 38, walking_halfsphere only (and room 296's other walking motions), searched for
+# rooms where local BA carries a keyframe > 3 cm, to judge two local-BA guards ("Session 38").
+heldout_seeds="201 202 203 204 205 206 207 208 209 210 211 212 213 214 215 216 217 218 219 220 221 222 223 224 225 226 227 228 229 230 231 232 233 234 235 236 237 238 239 240 241 242 243 244 245 246 247 248 249 250 251 252 253 254 255 256 257 258 259 260 261 262 263 264 265 266 267 268 269 270 271 272 273 274 275 276 277 278 279 280 281 282 283 284 285 286 287 288 289 290 291 292 293 294 295 296 297 298 299 300 301 302 303 304 305 306 307 308"
 while (($#)); do
   case "$1" in
     --set) set_name="$2"; shift 2 ;;
