@@ -183,22 +183,37 @@ TEST_F(LocalMapperTest, TriangulatesFeaturesWithoutDepthAtTheirTruePositions) {
 // A local BA that would carry a keyframe further than ba_max_keyframe_move_m is dropped: keyframe 2 is
 // stored 6 cm from where it saw the scene (its views are exact), so BA moves it back 6 cm. With the
 // bound at 3 cm nothing changes; without it, BA puts the keyframe where it was.
+// Keyframe 0 at the origin, keyframe 1 seeing the scene from x = 1 cm but stored at 7 cm (a tracked pose
+// 6 cm off); one local BA at keyframe 1 with `config` (culling and triangulation off). Returns the BA's
+// stats and where keyframe 1's centre ends up (x).
+struct OffsetKeyframeBA {
+  LocalMappingStats stats;
+  double x = 0;
+};
+OffsetKeyframeBA ba_of_offset_keyframe(const testing::SyntheticScene& scene, LocalMappingConfig config,
+                                       const geo::CameraIntrinsics& cam, const track::DepthModel& depth,
+                                       const map::ScalePyramid& pyramid) {
+  map::Map map;
+  testing::SyntheticMapBuilder builder(map, scene, cam, depth.bf, 100);
+  builder.add(at(0.0), at(0.0));
+  builder.add(at(0.01), at(0.07));
+  builder.finish(pyramid);
+  config.cull_keyframes = false;
+  config.triangulation.enabled = false;
+  LocalMapper mapper(map, config, cam, depth, pyramid);
+  OffsetKeyframeBA out;
+  out.stats = mapper.process(builder.keyframes()[1]);
+  map::MapView view = map.view();
+  out.x = view.keyframe(builder.keyframes()[1])->T_cw.inverse().translation().x();
+  return out;
+}
+
 TEST_F(LocalMapperTest, ALocalBAThatMovesAKeyframeTooFarIsDropped) {
   const auto scene = testing::make_slab_scene(600, 1.5, 1.0, 1.5, 3.0, 21);
   for (const double bound : {0.03, 0.0, 0.1}) {
-    map::Map map;  // a fresh one per bound
-    testing::SyntheticMapBuilder builder(map, scene, cam_, depth_.bf, 100);
-    builder.add(at(0.0), at(0.0));
-    builder.add(at(0.01), at(0.07));
-    builder.finish(pyramid_);
     LocalMappingConfig c;
     c.ba_max_keyframe_move_m = bound;
-    c.cull_keyframes = false;
-    c.triangulation.enabled = false;
-    LocalMapper mapper(map, c, cam_, depth_, pyramid_);
-    const LocalMappingStats s = mapper.process(builder.keyframes()[1]);
-    map::MapView view = map.view();
-    const double x = view.keyframe(builder.keyframes()[1])->T_cw.inverse().translation().x();
+    const auto [s, x] = ba_of_offset_keyframe(scene, c, cam_, depth_, pyramid_);
     const bool dropped = bound > 0.0 && bound < 0.06;
     EXPECT_EQ(s.ba_dropped, dropped) << "bound " << bound;
     EXPECT_TRUE(s.ba_solved) << "bound " << bound;
@@ -213,8 +228,8 @@ TEST_F(LocalMapperTest, ALocalBAThatMovesAKeyframeTooFarIsDropped) {
 }
 
 TEST_F(LocalMapperTest, AKeyframeWhoseSharedPointsCrowdIntoAPatchKeepsItsTrackedPose) {
-  // Keyframe 1 starts 6 cm from where it was: BA refines it back unless its shared points, all in a
-  // small patch of the image, leave its centre loosely pinned; then the weak-keyframe rule holds it.
+  // BA refines keyframe 1 back unless its shared points, all in a small patch of the image, leave its
+  // centre loosely pinned; then the weak-keyframe rule holds it where tracking put it.
   struct Case {
     double half_width;  // m, of the slab of points 1.5-3 m away
     double bound;       // m, ba_weak_keyframe_std_m
@@ -222,19 +237,9 @@ TEST_F(LocalMapperTest, AKeyframeWhoseSharedPointsCrowdIntoAPatchKeepsItsTracked
   };
   for (const Case c : {Case{1.5, 0.01, false}, Case{0.04, 0.01, true}, Case{0.04, 0.0, false}}) {
     const auto scene = testing::make_slab_scene(300, c.half_width, c.half_width, 1.5, 3.0, 5);
-    map::Map map;
-    testing::SyntheticMapBuilder builder(map, scene, cam_, depth_.bf, 100);
-    builder.add(at(0.0), at(0.0));
-    builder.add(at(0.01), at(0.07));
-    builder.finish(pyramid_);
     LocalMappingConfig config;
     config.ba_weak_keyframe_std_m = c.bound;
-    config.cull_keyframes = false;
-    config.triangulation.enabled = false;
-    LocalMapper mapper(map, config, cam_, depth_, pyramid_);
-    const LocalMappingStats s = mapper.process(builder.keyframes()[1]);
-    map::MapView view = map.view();
-    const double x = view.keyframe(builder.keyframes()[1])->T_cw.inverse().translation().x();
+    const auto [s, x] = ba_of_offset_keyframe(scene, config, cam_, depth_, pyramid_);
     const std::string label =
         "half width " + std::to_string(c.half_width) + ", bound " + std::to_string(c.bound);
     EXPECT_EQ(s.ba_held_keyframes, c.held ? 1 : 0) << label;
