@@ -6,27 +6,16 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
-#include <string>
-#include <unordered_map>
 
-#include "stillpoint/common/error.hpp"
+#include "stillpoint/optimize/bundle_adjustment_native.hpp"
 
 namespace sp::opt {
 
 std::vector<double> keyframe_centre_std(const BAProblem& problem, const CameraModel& camera) {
-  std::unordered_map<std::uint64_t, std::size_t> keyframe_index, point_index;
-  for (std::size_t i = 0; i < problem.keyframes.size(); ++i) keyframe_index[problem.keyframes[i].id] = i;
-  for (std::size_t i = 0; i < problem.points.size(); ++i) point_index[problem.points[i].id] = i;
+  // The same indexing (and the same errors for unknown or duplicate ids) as the BA itself.
+  const detail::BAIndex index = detail::index_observations(problem);
   std::vector<std::vector<std::size_t>> observations_of(problem.points.size());
-  for (std::size_t i = 0; i < problem.observations.size(); ++i) {
-    const BAObservation& o = problem.observations[i];
-    const auto k = keyframe_index.find(o.keyframe_id);
-    const auto p = point_index.find(o.point_id);
-    if (k == keyframe_index.end() || p == point_index.end())
-      throw Error("keyframe_centre_std: observation of point " + std::to_string(o.point_id) +
-                  " by keyframe " + std::to_string(o.keyframe_id) + " names an unknown keyframe or point");
-    observations_of[p->second].push_back(i);
-  }
+  for (std::size_t i = 0; i < problem.observations.size(); ++i) observations_of[index.pt[i]].push_back(i);
 
   std::vector<geo::Mat6> information(problem.keyframes.size(), geo::Mat6::Zero());
   struct Row {
@@ -41,7 +30,7 @@ std::vector<double> keyframe_centre_std(const BAProblem& problem, const CameraMo
     Eigen::Matrix3d H_point = Eigen::Matrix3d::Zero();
     for (std::size_t i : observations_of[p]) {
       const BAObservation& o = problem.observations[i];
-      const std::size_t k = keyframe_index.at(o.keyframe_id);
+      const std::size_t k = index.kf[i];
       const geo::SE3& T = problem.keyframes[k].T_cw;
       const Reprojection r =
           evaluate_reprojection(camera, T.rotation(), T.translation(), problem.points[p].p_w, o.uv, o.u_right,

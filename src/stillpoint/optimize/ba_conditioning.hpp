@@ -17,7 +17,7 @@ namespace sp::opt {
 // Per problem.keyframes entry: the largest standard deviation (m) of the camera centre, from the
 // observations of points that at least one other keyframe also observes; infinity when those
 // observations leave a direction unconstrained; 0 for fixed keyframes (not evaluated).
-// Throws sp::Error for an observation naming an unknown keyframe or point.
+// Throws sp::Error for duplicate ids or an observation naming an unknown keyframe or point (as BA).
 std::vector<double> keyframe_centre_std(const BAProblem& problem, const CameraModel& camera);
 
 }  // namespace sp::opt
