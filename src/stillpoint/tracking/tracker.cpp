@@ -63,8 +63,8 @@ Tracker::Tracker(map::Map& map, TrackerConfig config, geo::CameraIntrinsics came
       policy_(make_keyframe_policy(config_.keyframes)),
       camera_model_{camera.fx, camera.fy, camera.cx, camera.cy, depth.bf},
       guard_(config_.guard),
-      refiner_(config_.subpixel, camera, pyramid_),
-      new_point_check_(config_.new_point_motion, camera) {}
+      new_point_check_(config_.new_point_motion, camera),
+      refiner_(config_.subpixel, camera, pyramid_) {}
 
 void Tracker::start_in_existing_map() {
   // Lost, not NotInitialized: the next frames go through relocalize() and never create a map at
