@@ -252,8 +252,10 @@ void Tracker::look_for_other_maps(Frame& frame) {
   const geo::SE3 S_other_cur = probe.T_cw.inverse() * frame.T_cw;  // p_other = S * p_current
   if (!pending_merge_) {
     ++atlas_stats_.merge_candidates;
-    spdlog::info("frame {} (map {}) also located in map {} against keyframe {}: verifying a merge",
-                 frame.index, map::to_int(current_map_), map::to_int(other), match);
+    spdlog::info(
+        "frame {} (map {}) also located in map {} against keyframe {} ({} inliers there, {} here): "
+        "verifying a merge",
+        frame.index, map::to_int(current_map_), map::to_int(other), match, probe.matched(), frame.matched());
     pending_merge_ =
         PendingMerge{other, match, S_other_cur, config_.relocalization_verify_frames, frame.index};
   } else {
@@ -264,11 +266,17 @@ void Tracker::look_for_other_maps(Frame& frame) {
         d.translation_m > config_.relocalization_max_step_m ||
         d.rotation_deg > config_.relocalization_max_step_deg) {
       ++atlas_stats_.merges_rejected;
-      spdlog::info("map merge candidate rejected at frame {}: {:.1f} cm / {:.2f} deg from the first estimate",
-                   frame.index, d.translation_m * 100, d.rotation_deg);
+      spdlog::info(
+          "map merge candidate rejected at frame {}: {:.1f} cm / {:.2f} deg from the first estimate ({} "
+          "inliers there, {} here)",
+          frame.index, d.translation_m * 100, d.rotation_deg, probe.matched(), frame.matched());
       pending_merge_.reset();
       return;
     }
+    spdlog::debug(
+        "map merge check at frame {}: {:.1f} cm / {:.2f} deg from the first estimate ({} inliers there, {} "
+        "here)",
+        frame.index, d.translation_m * 100, d.rotation_deg, probe.matched(), frame.matched());
     --pending_merge_->left;
     pending_merge_->last_frame = frame.index;
   }
