@@ -180,9 +180,6 @@ TEST_F(LocalMapperTest, TriangulatesFeaturesWithoutDepthAtTheirTruePositions) {
   EXPECT_EQ(checked, s.triangulated_points);
 }
 
-// A local BA that would carry a keyframe further than ba_max_keyframe_move_m is dropped: keyframe 2 is
-// stored 6 cm from where it saw the scene (its views are exact), so BA moves it back 6 cm. With the
-// bound at 3 cm nothing changes; without it, BA puts the keyframe where it was.
 // Keyframe 0 at the origin, keyframe 1 seeing the scene from x = 1 cm but stored at 7 cm (a tracked pose
 // 6 cm off); one local BA at keyframe 1 with `config` (culling and triangulation off). Returns the BA's
 // stats and where keyframe 1's centre ends up (x).
@@ -208,6 +205,9 @@ OffsetKeyframeBA ba_of_offset_keyframe(const testing::SyntheticScene& scene, Loc
   return out;
 }
 
+// A local BA that would carry a keyframe further than ba_max_keyframe_move_m is dropped: keyframe 1 is
+// stored 6 cm from where it saw the scene (its views are exact), so BA moves it back 6 cm. With the
+// bound at 3 cm nothing changes; without it, BA puts the keyframe where it was.
 TEST_F(LocalMapperTest, ALocalBAThatMovesAKeyframeTooFarIsDropped) {
   const auto scene = testing::make_slab_scene(600, 1.5, 1.0, 1.5, 3.0, 21);
   for (const double bound : {0.03, 0.0, 0.1}) {

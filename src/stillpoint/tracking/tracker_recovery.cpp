@@ -249,13 +249,14 @@ void Tracker::look_for_other_maps(Frame& frame) {
     return;
   }
   const map::MapId other = matched->map_id;
-  const geo::SE3 S_other_cur = probe.T_cw.inverse() * frame.T_cw;  // p_other = S * p_current
+  const geo::SE3 S_other_cur = probe.T_cw.inverse() * frame.T_cw;             // p_other = S * p_current
+  const int inliers_there = probe.matched(), inliers_here = frame.matched();  // for the log lines below
   if (!pending_merge_) {
     ++atlas_stats_.merge_candidates;
     spdlog::info(
         "frame {} (map {}) also located in map {} against keyframe {} ({} inliers there, {} here): "
         "verifying a merge",
-        frame.index, map::to_int(current_map_), map::to_int(other), match, probe.matched(), frame.matched());
+        frame.index, map::to_int(current_map_), map::to_int(other), match, inliers_there, inliers_here);
     pending_merge_ =
         PendingMerge{other, match, S_other_cur, config_.relocalization_verify_frames, frame.index};
   } else {
@@ -269,14 +270,14 @@ void Tracker::look_for_other_maps(Frame& frame) {
       spdlog::info(
           "map merge candidate rejected at frame {}: {:.1f} cm / {:.2f} deg from the first estimate ({} "
           "inliers there, {} here)",
-          frame.index, d.translation_m * 100, d.rotation_deg, probe.matched(), frame.matched());
+          frame.index, d.translation_m * 100, d.rotation_deg, inliers_there, inliers_here);
       pending_merge_.reset();
       return;
     }
     spdlog::debug(
         "map merge check at frame {}: {:.1f} cm / {:.2f} deg from the first estimate ({} inliers there, {} "
         "here)",
-        frame.index, d.translation_m * 100, d.rotation_deg, probe.matched(), frame.matched());
+        frame.index, d.translation_m * 100, d.rotation_deg, inliers_there, inliers_here);
     --pending_merge_->left;
     pending_merge_->last_frame = frame.index;
   }
