@@ -55,6 +55,8 @@ RunMetrics metrics_from_row(const nlohmann::json& row) {
     m.ate_cm = scaled(number_at(row["ate"], "rmse"), 100.0);
     m.max_error_cm = scaled(number_at(row["ate"], "max"), 100.0);
   }
+  if (row.contains("every_frame"))
+    m.ate_every_frame_cm = scaled(number_at(row["every_frame"], "ate_rmse_m"), 100.0);
   // A run that wrote no stats (crashed) has no frames: its zeros are not measurements.
   if (row.value("frames", 0) > 0) {
     m.lost_frames = number_at(row, "lost_frames");
@@ -120,6 +122,7 @@ std::vector<AggregateRow> aggregate_repeats(const std::vector<RunMetrics>& runs)
       row.ate_max_cm = *std::max_element(ates.begin(), ates.end());
     }
     row.max_error_cm = median_of(list, [](const RunMetrics& r) { return r.max_error_cm; });
+    row.ate_every_frame_cm = median_of(list, [](const RunMetrics& r) { return r.ate_every_frame_cm; });
     row.lost_frames = median_of(list, [](const RunMetrics& r) { return r.lost_frames; });
     row.fps = median_of(list, [](const RunMetrics& r) { return r.fps; });
     row.track_ms = median_of(list, [](const RunMetrics& r) { return r.track_ms; });
@@ -187,6 +190,7 @@ nlohmann::json to_json(const RunMetrics& m) {
           {"exit_code", m.exit_code},
           {"ate_cm", opt(m.ate_cm)},
           {"max_error_cm", opt(m.max_error_cm)},
+          {"ate_every_frame_cm", opt(m.ate_every_frame_cm)},
           {"lost_frames", opt(m.lost_frames)},
           {"fps", opt(m.fps)},
           {"track_ms", opt(m.track_ms)},
@@ -204,6 +208,7 @@ nlohmann::json to_json(const AggregateRow& r) {
           {"ate_cm_min", opt(r.ate_min_cm)},
           {"ate_cm_max", opt(r.ate_max_cm)},
           {"max_error_cm_median", opt(r.max_error_cm)},
+          {"ate_every_frame_cm_median", opt(r.ate_every_frame_cm)},
           {"lost_frames_median", opt(r.lost_frames)},
           {"fps_median", opt(r.fps)},
           {"track_ms_median", opt(r.track_ms)},

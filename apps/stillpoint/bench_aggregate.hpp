@@ -18,6 +18,9 @@ struct RunMetrics {
   int exit_code = 0;
   std::optional<double> ate_cm;        // ATE RMSE after SE(3) alignment
   std::optional<double> max_error_cm;  // max per-frame translation error after alignment (ATE max)
+  // ATE RMSE with every frame given a pose (lost ones interpolated across their gap, the rule of
+  // `eval --fill-missing interpolate`): like for like with systems that write a pose for each frame.
+  std::optional<double> ate_every_frame_cm;
   std::optional<double> lost_frames;
   std::optional<double> fps;
   std::optional<double> track_ms;  // tracking thread, median ms per frame
@@ -31,7 +34,7 @@ struct AggregateRow {
   std::string variant;
   int runs = 0;    // repeats run
   int failed = 0;  // repeats with a non-zero exit code
-  std::optional<double> ate_cm, ate_min_cm, ate_max_cm;
+  std::optional<double> ate_cm, ate_min_cm, ate_max_cm, ate_every_frame_cm;
   std::optional<double> max_error_cm, lost_frames, fps, track_ms, lock_ms, cull_precision, cull_recall;
 };
 
@@ -55,6 +58,7 @@ struct SummaryRow {
 std::optional<double> median(std::vector<double> values);
 
 // The run metrics of one bench row (the JSON of a run as `bench` writes it: "ate" {rmse, max} in metres,
+// "every_frame" {ate_rmse_m},
 // lost_frames, fps, ms.frame.median, ms.track_lock.median, culling_score {precision, recall,
 // true_dynamic_keypoints}).
 RunMetrics metrics_from_row(const nlohmann::json& row);

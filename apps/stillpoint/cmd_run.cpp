@@ -262,9 +262,15 @@ int run(const RunArgs& args) {
     const auto& e = s["eval"];
     fmt::print("ATE RMSE {:.4f} m | RPE trans RMSE {:.4f} m, rot RMSE {:.3f} deg (delta 1 s)\n",
                *result.ate_rmse, e["rpe_trans"].value("rmse", 0.0), e["rpe_rot_deg"].value("rmse", 0.0));
+    const auto& all = s["every_frame"];
+    if (all.contains("ate_rmse_m") && s.value("lost_frames", 0) > 0) {
+      fmt::print("ATE RMSE on every frame {:.4f} m (lost frames interpolated, trajectory_every_frame.txt)\n",
+                 all.value("ate_rmse_m", 0.0));
+    }
   }
   fmt::print(
-      "outputs: {}/trajectory.txt (TUM; trajectory_kitti.txt: KITTI), keyframes.txt, stats.json, "
+      "outputs: {}/trajectory.txt (TUM; trajectory_kitti.txt: KITTI; trajectory_every_frame.txt: lost frames "
+      "filled), keyframes.txt, stats.json, "
       "map_points.ply{}{}, culled/\n",
       args.out, args.dense_cloud ? ", dense_cloud.ply" : "", result.ate_rmse ? ", trajectory.png" : "");
   if (s.contains("map_loaded")) {

@@ -38,9 +38,15 @@ TEST(BenchAggregate, MediansAndSpreadOverRepeats) {
   const std::vector<RunMetrics> runs{
       run("tune/a", "default", 0, 2.0, 5.0, 0, 30.0), run("tune/a", "default", 1, 4.0, 9.0, 2, 20.0),
       run("tune/a", "default", 2, 3.0, 6.0, 1, 25.0), run("tune/a", "oracle", 0, 1.0, 2.0, 0, 40.0)};
-  const auto rows = aggregate_repeats(runs);
+  std::vector<RunMetrics> with_all = runs;
+  with_all[0].ate_every_frame_cm = 7.0;  // one repeat lost frames, two have none filled (= their ATE)
+  with_all[1].ate_every_frame_cm = 4.0;
+  with_all[2].ate_every_frame_cm = 3.0;
+  const auto rows = aggregate_repeats(with_all);
   ASSERT_EQ(rows.size(), 2u);
   const auto& d = rows[0];
+  EXPECT_DOUBLE_EQ(*d.ate_every_frame_cm, 4.0);
+  EXPECT_FALSE(rows[1].ate_every_frame_cm.has_value());
   EXPECT_EQ(d.sequence, "tune/a");
   EXPECT_EQ(d.variant, "default");
   EXPECT_EQ(d.runs, 3);
@@ -164,7 +170,7 @@ TEST(BenchAggregate, MetricsFromABenchRow) {
   const auto row = nlohmann::json::parse(R"({
     "sequence": "tune/room101", "variant": "default", "repeat": 2, "exit_code": 0,
     "frames": 50, "lost_frames": 3, "fps": 17.5,
-    "ate": {"rmse": 0.0123, "max": 0.045},
+    "ate": {"rmse": 0.0123, "max": 0.045}, "every_frame": {"ate_rmse_m": 0.0321},
     "ms": {"frame": {"median": 21.5, "p95": 30.0}, "track_lock": {"median": 0.75, "p95": 1.5}},
     "culling_score": {"true_dynamic_keypoints": 100, "precision": 0.8, "recall": 0.6}})");
   const RunMetrics m = metrics_from_row(row);
@@ -172,6 +178,7 @@ TEST(BenchAggregate, MetricsFromABenchRow) {
   EXPECT_EQ(m.repeat, 2);
   EXPECT_NEAR(*m.ate_cm, 1.23, 1e-12);
   EXPECT_NEAR(*m.max_error_cm, 4.5, 1e-12);
+  EXPECT_NEAR(*m.ate_every_frame_cm, 3.21, 1e-12);
   EXPECT_DOUBLE_EQ(*m.lost_frames, 3.0);
   EXPECT_DOUBLE_EQ(*m.fps, 17.5);
   EXPECT_DOUBLE_EQ(*m.track_ms, 21.5);
@@ -185,6 +192,7 @@ TEST(BenchAggregate, MetricsFromABenchRow) {
           "culling_score": {"true_dynamic_keypoints": 0, "precision": 0, "recall": 0}})"));
   EXPECT_EQ(crashed.exit_code, 139);
   EXPECT_FALSE(crashed.ate_cm.has_value());
+  EXPECT_FALSE(crashed.ate_every_frame_cm.has_value());
   EXPECT_FALSE(crashed.lost_frames.has_value());
   EXPECT_FALSE(crashed.fps.has_value());
   EXPECT_FALSE(crashed.lock_ms.has_value());

@@ -535,6 +535,26 @@ TEST_F(Faults, KidnappedToAnUnseenPlaceStartsANewMapWhoseFramesAreFlagged) {
   }
   EXPECT_EQ(st["frames_per_map"]["1"].get<std::size_t>(), in_map1);
   EXPECT_EQ(st["frames_per_map"]["0"].get<std::size_t>(), o.stamps.size() - in_map1);
+  // trajectory_every_frame.txt has a pose for each of the frames given; the lost frames before map 1
+  // starts lie between two maps, so they hold the last map-0 pose instead of blending the two frames.
+  const auto every =
+      io::read_tum_trajectory(fs::path(SP_TEST_TMP_DIR) / "faults" /
+                              (seq.dir().filename().string() + "_out") / "trajectory_every_frame.txt");
+  ASSERT_EQ(every.size(), order.size());
+  EXPECT_EQ(
+      st["every_frame"]["held"].get<std::size_t>() + st["every_frame"]["interpolated"].get<std::size_t>(),
+      order.size() - o.stamps.size());
+  const auto first_in_map1 =
+      std::find_if(maps.begin(), maps.end(), [](const auto& m) { return m.second == 1; });
+  ASSERT_NE(first_in_map1, maps.end());
+  const std::size_t last_map0 = static_cast<std::size_t>(first_in_map1 - maps.begin()) - 1;
+  std::size_t held_between_maps = 0;
+  for (const auto& p : every) {
+    if (p.stamp <= maps[last_map0].first + 1e-5 || p.stamp >= first_in_map1->first - 1e-5) continue;
+    ++held_between_maps;
+    EXPECT_NEAR((p.t - every[last_map0].t).norm(), 0.0, 1e-6) << std::fixed << p.stamp;
+  }
+  EXPECT_GE(held_between_maps, 45u);
   // The office frames (ground truth covers only them) are as accurate as in the other fault tests.
   ASSERT_TRUE(o.result.ate_rmse.has_value());
   EXPECT_LT(*o.result.ate_rmse, 0.02);

@@ -12,6 +12,7 @@
 #include "stillpoint/common/timing.hpp"
 #include "stillpoint/eval/evaluate.hpp"
 #include "stillpoint/eval/loop_check.hpp"
+#include "stillpoint/eval/missing_frames.hpp"
 #include "stillpoint/pipeline/slam_system.hpp"
 
 namespace sp::api {
@@ -61,8 +62,27 @@ void write_trajectory_maps(const std::filesystem::path& file,
   for (const auto& [stamp, m] : maps) out << fmt::format("{:.6f} {}\n", stamp, m);
 }
 
+// trajectory.txt leaves lost frames out; this one has a pose for every frame given, the lost ones
+// interpolated across their gap (held at the end or between maps), the rule `stillpoint eval
+// --fill-missing interpolate` applies to any system's file. How many were filled goes into stats.json.
+std::vector<io::StampedPose> write_every_frame_trajectory(
+    const std::filesystem::path& file, const std::vector<double>& frame_stamps,
+    const std::vector<io::StampedPose>& trajectory, const std::vector<std::pair<double, std::uint32_t>>& maps,
+    nlohmann::json& stats) {
+  std::vector<std::uint32_t> map_ids;
+  for (const auto& m : maps) map_ids.push_back(m.second);
+  const auto filled =
+      eval::fill_missing_frames(frame_stamps, trajectory, eval::MissingFrames::Interpolate, map_ids);
+  io::write_tum_trajectory(file, filled.poses);
+  stats["every_frame"] = {{"frames", frame_stamps.size()},
+                          {"interpolated", filled.interpolated},
+                          {"held", filled.held},
+                          {"before_first_pose", filled.before_first}};
+  return filled.poses;
+}
+
 void write_outputs(stillpoint::System& system, const RunOptions& options, const nlohmann::json& run_stats,
-                   RunResult& result) {
+                   const std::vector<double>& frame_stamps, RunResult& result) {
   std::filesystem::create_directories(options.out_dir);
   system.save_trajectory(options.out_dir / "trajectory.txt", stillpoint::TrajectoryFormat::Tum);
   // trajectory_kitti.txt and its timestamps, trajectory_kitti_times.txt
@@ -72,8 +92,12 @@ void write_outputs(stillpoint::System& system, const RunOptions& options, const 
   // API's rotation matrices), so its figures stay those of the files above.
   pipeline::SlamSystem& slam = SystemAccess::pipeline(system);
   const auto trajectory = slam.trajectory();
-  write_trajectory_maps(options.out_dir / "trajectory_maps.txt", slam.trajectory_maps());
+  const auto trajectory_maps = slam.trajectory_maps();
+  write_trajectory_maps(options.out_dir / "trajectory_maps.txt", trajectory_maps);
   result.stats = slam.statistics();
+  const auto every_frame =
+      write_every_frame_trajectory(options.out_dir / "trajectory_every_frame.txt", frame_stamps, trajectory,
+                                   trajectory_maps, result.stats);
   if (!result.stats["unmerged_maps"].empty()) {
     spdlog::warn(
         "maps {} were never merged into map 0: their frames in trajectory.txt are in their own frames "
@@ -97,6 +121,11 @@ void write_outputs(stillpoint::System& system, const RunOptions& options, const 
       const auto ev = eval::evaluate(gt, trajectory, eval::EvalOptions{});
       result.stats["eval"] = eval::to_json(ev);
       result.ate_rmse = ev.ate.rmse;
+      // Scored on every frame, as systems that write a pose for each are (NGD-SLAM, ORB-SLAM3).
+      const auto ev_all = eval::evaluate(gt, every_frame, eval::EvalOptions{});
+      result.stats["every_frame"]["ate_rmse_m"] = ev_all.ate.rmse;
+      result.stats["every_frame"]["ate_max_m"] = ev_all.ate.max;
+      result.stats["every_frame"]["pairs"] = ev_all.pairs;
       eval::write_plot(options.out_dir / "trajectory.png", ev);
       check_loops_against(gt, slam.loop_closures(), result.stats);
     } catch (const Error& e) {
@@ -128,6 +157,7 @@ RunResult run_slam(io::FrameSource& source, const pipeline::SystemConfig& config
   PlaybackClock pace(options.playback_rate);
   std::size_t done = 0;
   std::size_t lost = 0;
+  std::vector<double> frame_stamps;  // every frame given, tracked or not
   bool interrupted = false;
   nlohmann::json rss_timeline = nlohmann::json::array();  // [frames done, current RSS MiB]
   auto on_frame = options.on_frame;
@@ -144,6 +174,7 @@ RunResult run_slam(io::FrameSource& source, const pipeline::SystemConfig& config
       slam.times().add("load", load.elapsed_ms());
       if (!data) break;
       if (options.playback_rate > 0) pace.wait_for(data->stamp);
+      frame_stamps.push_back(data->stamp);
       const stillpoint::TrackResult tracked = SystemAccess::track(system, *data);
       if (on_frame) {
         try {
@@ -193,7 +224,7 @@ RunResult run_slam(io::FrameSource& source, const pipeline::SystemConfig& config
                                     {"fps", static_cast<double>(done) / std::max(1e-9, seconds)},
                                     {"skipped_frames", source.skipped_frames()},
                                     {"rss_timeline_mib", rss_timeline}};
-  write_outputs(system, options, run_stats, result);
+  write_outputs(system, options, run_stats, frame_stamps, result);
   return result;
 }
 
