@@ -516,6 +516,14 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
     }
     res.box_dynamic[b] = dyn || still_person[b];
     if (res.box_dynamic[b]) track.last_culled_frame = in.frame_index;
+    spdlog::debug(
+        "frame {} box {} (x {:.0f}-{:.0f}, class {}): seen {} ({} of {} moving), still streak {}{}{}{}",
+        in.frame_index, b, det.box.x, det.box.x + det.box.width, det.class_id,
+        seen == Seen::kMoving  ? "moving"
+        : seen == Seen::kStill ? "still"
+                               : "undecided",
+        mov, total, track.static_streak, held ? ", held" : "", unproven ? ", unproven" : "",
+        still_person[b] ? ", proven still" : "");
   }
 
   // 5. Confirmed movers: moving points with enough moving neighbours (isolated ones are noise).
@@ -622,6 +630,8 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
     classify();
     res.still_people_released = true;
   }
+  if (any_still)
+    spdlog::debug("frame {}: proven-still people {}", in.frame_index, poor ? "released" : "culled");
   // After the release: box_track indexes tracks_.
   std::erase_if(tracks_, [&](const BoxTrack& t) {
     return in.frame_index > t.last_seen_frame + static_cast<std::size_t>(std::max(cfg_.dynamic_hold_frames,
