@@ -69,6 +69,8 @@ std::filesystem::path make_synthetic_run(const std::string& name, const Syntheti
                           {"dynamic_mode", "detector+flow"},
                           {"culled_features_per_frame", 12.5},
                           {"completed", true}};
+  stats["every_frame"] = {
+      {"frames", 123}, {"interpolated", 4}, {"ate_rmse_m", 0.0123}, {"ate_max_m", 0.0456}};
   stats["stages_ms"] = {{"extract",
                          {{"count", 123},
                           {"total_ms", 400.0},

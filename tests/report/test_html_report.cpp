@@ -64,6 +64,10 @@ TEST(Report, SyntheticRunShowsItsNumbers) {
   EXPECT_GT(ate, 0.0005);
   EXPECT_LT(ate, 0.01);
   EXPECT_NEAR(ate, run.eval->ate.rmse, 1e-4);
+  // With the lost frames filled, as the run stored it.
+  EXPECT_TRUE(contains(html,
+                       "<th>ATE RMSE on every frame (lost frames interpolated)</th><td class=\"num\">0.0123 "
+                       "m, max 0.0456 m</td>"));
   // Timing table with median and p95.
   EXPECT_TRUE(contains(html,
                        "<td>extract</td><td class=\"num\">123</td><td class=\"num\">3.25</td><td "

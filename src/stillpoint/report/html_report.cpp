@@ -174,6 +174,13 @@ std::string summary_section(const RunData& run) {
     h += row("RPE translation RMSE (1 s)", number(e["rpe_trans"], "rmse", "{:.4f}") + " m");
     h += row("RPE rotation RMSE (1 s)", number(e["rpe_rot_deg"], "rmse", "{:.3f}") + " deg");
     h += row("Pose pairs (ATE)", number(e, "pairs"));
+    // Lost frames filled (trajectory_every_frame.txt): the figure to set beside a system that writes a
+    // pose for every frame.
+    if (s.contains("every_frame") && s["every_frame"].contains("ate_rmse_m")) {
+      h += row("ATE RMSE on every frame (lost frames interpolated)",
+               number(s["every_frame"], "ate_rmse_m", "{:.4f}") + " m, max " +
+                   number(s["every_frame"], "ate_max_m", "{:.4f}") + " m");
+    }
   } else {
     h += row("ATE / RPE", "n/a (no ground truth)");
   }
