@@ -28,6 +28,7 @@ DynamicConfig DynamicConfig::from_yaml(const ConfigReader& r) {
   r.read("stale_wait_ms", c.stale_wait_ms, 0.0, 10000.0);
   r.read("wait_first_detection", c.wait_first_detection);
   r.read("deterministic_detector_latency", c.deterministic_detector_latency, 0, 100);
+  r.read("oracle_moving_only", c.oracle_moving_only);
   if (r.has("detector")) {
     c.detector = dyn::DetectorConfig::from_yaml(r.section("detector"));
     c.detector_configured = true;
@@ -67,7 +68,8 @@ DynamicCulling::DynamicCulling(const DynamicConfig& config, const geo::CameraInt
       interval_(config.detector_interval),
       max_detection_age_(config.max_detection_age),
       stale_wait_ms_(config.stale_wait_ms),
-      wait_first_detection_(config.wait_first_detection) {
+      wait_first_detection_(config.wait_first_detection),
+      oracle_moving_only_(config.oracle_moving_only) {
   K_ << camera.fx, 0, camera.cx, 0, camera.fy, camera.cy, 0, 0, 1;
   if (mode_ == "off") return;
   if (mode_ == "detector" || mode_ == "detector+flow") {
@@ -132,7 +134,7 @@ CullingOutput DynamicCulling::process(const io::FrameData& data, const cv::Mat& 
     detections = std::move(fresh.detections);
     out.stale_wait_ms = fresh.stale_wait_ms;
   } else if (oracle_) {
-    detections = oracle_->at(data.stamp, data.index);
+    detections = oracle_->at(data.stamp, data.index, oracle_moving_only_);
   }
   if (detections) {
     out.detection_used = true;

@@ -68,6 +68,9 @@ struct DynamicConfig {
   // synchronous detector). Reproduces, repeatably, the late boxes of a threaded run on a busy CPU
   // (there: 1 to max_detection_age + 2 frames), for tests and for diagnosing failures seen threaded.
   int deterministic_detector_latency = 0;
+  // mode oracle: cull the ground-truth boxes of moving people only (true: what the oracle means), or of
+  // every person, still ones too (false: for measuring what still people's features are worth).
+  bool oracle_moving_only = true;
   dyn::DetectorConfig detector;  // used as given when the file sets `detector`, else from the model
   bool detector_configured = false;
   dyn::MotionCheckConfig motion;
@@ -115,6 +118,7 @@ class DynamicCulling {
   int max_detection_age_;
   double stale_wait_ms_;
   bool wait_first_detection_;
+  bool oracle_moving_only_;
   Eigen::Matrix3d K_;
   std::filesystem::path model_file_;
   dyn::DetectorConfig detector_config_;
