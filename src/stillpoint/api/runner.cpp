@@ -95,9 +95,13 @@ void write_outputs(stillpoint::System& system, const RunOptions& options, const 
   const auto trajectory_maps = slam.trajectory_maps();
   write_trajectory_maps(options.out_dir / "trajectory_maps.txt", trajectory_maps);
   result.stats = slam.statistics();
-  const auto every_frame =
-      write_every_frame_trajectory(options.out_dir / "trajectory_every_frame.txt", frame_stamps, trajectory,
-                                   trajectory_maps, result.stats);
+  std::vector<io::StampedPose> every_frame;
+  try {
+    every_frame = write_every_frame_trajectory(options.out_dir / "trajectory_every_frame.txt", frame_stamps,
+                                               trajectory, trajectory_maps, result.stats);
+  } catch (const std::exception& e) {
+    spdlog::warn("trajectory_every_frame.txt not written: {}", e.what());
+  }
   if (!result.stats["unmerged_maps"].empty()) {
     spdlog::warn(
         "maps {} were never merged into map 0: their frames in trajectory.txt are in their own frames "
@@ -121,13 +125,15 @@ void write_outputs(stillpoint::System& system, const RunOptions& options, const 
       const auto ev = eval::evaluate(gt, trajectory, eval::EvalOptions{});
       result.stats["eval"] = eval::to_json(ev);
       result.ate_rmse = ev.ate.rmse;
-      // Scored on every frame, as systems that write a pose for each are (NGD-SLAM, ORB-SLAM3).
-      const auto ev_all = eval::evaluate(gt, every_frame, eval::EvalOptions{});
-      result.stats["every_frame"]["ate_rmse_m"] = ev_all.ate.rmse;
-      result.stats["every_frame"]["ate_max_m"] = ev_all.ate.max;
-      result.stats["every_frame"]["pairs"] = ev_all.pairs;
       eval::write_plot(options.out_dir / "trajectory.png", ev);
       check_loops_against(gt, slam.loop_closures(), result.stats);
+      // Scored on every frame, as systems that write a pose for each are (NGD-SLAM, ORB-SLAM3).
+      if (!every_frame.empty()) {
+        const auto ev_all = eval::evaluate(gt, every_frame, eval::EvalOptions{});
+        result.stats["every_frame"]["ate_rmse_m"] = ev_all.ate.rmse;
+        result.stats["every_frame"]["ate_max_m"] = ev_all.ate.max;
+        result.stats["every_frame"]["pairs"] = ev_all.pairs;
+      }
     } catch (const Error& e) {
       spdlog::warn("evaluation skipped: {}", e.what());
     }
