@@ -93,8 +93,9 @@ std::string svg_top_view(const std::vector<PathSeries>& series,
         left, py(t), left + pw, left - 4, py(t) + 4, fmt_tick(t));
   svg += fmt::format(R"(<text x="{}" y="{}" text-anchor="middle">{} [m]</text>)", left + pw / 2, height - 6,
                      kAxisNames[a]);
-  svg += fmt::format(R"svg(<text x="14" y="{}" text-anchor="middle" transform="rotate(-90 14 {})">{} [m]</text>)svg",
-                     top + ph / 2, top + ph / 2, kAxisNames[b]);
+  svg += fmt::format(
+      R"svg(<text x="14" y="{}" text-anchor="middle" transform="rotate(-90 14 {})">{} [m]</text>)svg",
+      top + ph / 2, top + ph / 2, kAxisNames[b]);
   if (!error_pairs.empty()) {
     // At most ~400 segments: enough to show where the error is, without bloating the page.
     const std::size_t every = std::max<std::size_t>(1, error_pairs.size() / 400);
@@ -158,8 +159,9 @@ std::string svg_line_chart(const std::vector<double>& x, const std::vector<doubl
         left, py(t), left + pw, left - 4, py(t) + 4, fmt_tick(t));
   svg += fmt::format(R"(<text x="{}" y="{}" text-anchor="middle">{}</text>)", left + pw / 2, height - 6,
                      x_label);
-  svg += fmt::format(R"svg(<text x="14" y="{}" text-anchor="middle" transform="rotate(-90 14 {})">{}</text>)svg",
-                     top + ph / 2, top + ph / 2, y_label);
+  svg +=
+      fmt::format(R"svg(<text x="14" y="{}" text-anchor="middle" transform="rotate(-90 14 {})">{}</text>)svg",
+                  top + ph / 2, top + ph / 2, y_label);
   std::string points;
   points.reserve(n * 14);
   for (std::size_t i = 0; i < n; ++i) points += fmt::format("{:.1f},{:.1f} ", px(x[i]), py(y[i]));
