@@ -25,7 +25,6 @@
 #include "stillpoint/eval/evaluate.hpp"
 #include "stillpoint/eval/missing_frames.hpp"
 #include "stillpoint/io/trajectory_io.hpp"
-#include "stillpoint/io/tum_text.hpp"
 
 extern char** environ;
 
@@ -441,13 +440,12 @@ std::pair<int, nlohmann::json> run_peer(const Peer& peer, const std::filesystem:
         const auto gt = io::read_tum_trajectory(seq / "groundtruth.txt");
         s["eval"] = eval::to_json(eval::evaluate(gt, est, eval::EvalOptions{}));
         // The rule our runs' trajectory_every_frame.txt follows, for peers that leave lost frames out.
-        std::vector<double> stamps;
-        for (const auto& f : io::read_tum_file_list(seq / "rgb.txt")) stamps.push_back(f.stamp);
+        const auto stamps = eval::read_frame_stamps(seq / "rgb.txt");
         const auto filled = eval::fill_missing_frames(stamps, est, eval::MissingFrames::Interpolate);
         const auto all = eval::evaluate(gt, filled.poses, eval::EvalOptions{});
-        s["every_frame"] = {{"frames", stamps.size()},    {"interpolated", filled.interpolated},
-                            {"held", filled.held},        {"before_first_pose", filled.before_first},
-                            {"ate_rmse_m", all.ate.rmse}, {"ate_max_m", all.ate.max}};
+        s["every_frame"] = eval::to_json(filled, stamps.size());
+        s["every_frame"]["ate_rmse_m"] = all.ate.rmse;
+        s["every_frame"]["ate_max_m"] = all.ate.max;
       }
     } catch (const std::exception& e) {
       spdlog::warn("peer {}: evaluation failed: {}", peer.name, e.what());

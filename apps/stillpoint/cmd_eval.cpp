@@ -58,8 +58,7 @@ std::vector<io::StampedPose> fill_missing(const EvalArgs& a, const std::vector<i
     throw Error("--fill-missing needs the sequence's frame list: " + frames_file.string() +
                 " does not exist (give --frames rgb.txt, or --gt a sequence folder)");
   }
-  std::vector<double> stamps;
-  for (const auto& f : io::read_tum_file_list(frames_file)) stamps.push_back(f.stamp);
+  const std::vector<double> stamps = eval::read_frame_stamps(frames_file);
   const std::vector<std::uint32_t> maps =
       a.maps.empty() ? std::vector<std::uint32_t>{} : read_map_ids(a.maps);
   if (!maps.empty() && maps.size() != est.size()) {

@@ -262,10 +262,11 @@ int run(const RunArgs& args) {
     const auto& e = s["eval"];
     fmt::print("ATE RMSE {:.4f} m | RPE trans RMSE {:.4f} m, rot RMSE {:.3f} deg (delta 1 s)\n",
                *result.ate_rmse, e["rpe_trans"].value("rmse", 0.0), e["rpe_rot_deg"].value("rmse", 0.0));
-    const auto& all = s["every_frame"];
-    if (all.contains("ate_rmse_m") && s.value("lost_frames", 0) > 0) {
+    // stats is const: operator[] on a missing key would be undefined, so look before reading.
+    if (s.contains("every_frame") && s["every_frame"].contains("ate_rmse_m") &&
+        s.value("lost_frames", 0) > 0) {
       fmt::print("ATE RMSE on every frame {:.4f} m (lost frames interpolated, trajectory_every_frame.txt)\n",
-                 all.value("ate_rmse_m", 0.0));
+                 s["every_frame"].value("ate_rmse_m", 0.0));
     }
   }
   fmt::print(

@@ -74,10 +74,7 @@ std::vector<io::StampedPose> write_every_frame_trajectory(
   const auto filled =
       eval::fill_missing_frames(frame_stamps, trajectory, eval::MissingFrames::Interpolate, map_ids);
   io::write_tum_trajectory(file, filled.poses);
-  stats["every_frame"] = {{"frames", frame_stamps.size()},
-                          {"interpolated", filled.interpolated},
-                          {"held", filled.held},
-                          {"before_first_pose", filled.before_first}};
+  stats["every_frame"] = eval::to_json(filled, frame_stamps.size());
   return filled.poses;
 }
 

@@ -3,6 +3,7 @@
 #include <cmath>
 
 #include "stillpoint/common/error.hpp"
+#include "stillpoint/io/tum_text.hpp"
 
 namespace sp::eval {
 
@@ -45,6 +46,19 @@ FilledTrajectory fill_missing_frames(const std::vector<double>& frame_stamps,
   }
   while (next < est.size()) out.poses.push_back(est[next++]);
   return out;
+}
+
+std::vector<double> read_frame_stamps(const std::filesystem::path& frame_list) {
+  std::vector<double> stamps;
+  for (const auto& f : io::read_tum_file_list(frame_list)) stamps.push_back(f.stamp);
+  return stamps;
+}
+
+nlohmann::json to_json(const FilledTrajectory& filled, std::size_t frames) {
+  return {{"frames", frames},
+          {"interpolated", filled.interpolated},
+          {"held", filled.held},
+          {"before_first_pose", filled.before_first}};
 }
 
 }  // namespace sp::eval

@@ -3,6 +3,8 @@
 // that writes a pose for each (NGD-SLAM's) are compared on the same frames only when the skipped ones
 // are filled by one rule for all.
 #include <cstdint>
+#include <filesystem>
+#include <nlohmann/json.hpp>
 #include <vector>
 
 #include "stillpoint/io/trajectory_io.hpp"
@@ -30,5 +32,11 @@ FilledTrajectory fill_missing_frames(const std::vector<double>& frame_stamps,
                                      const std::vector<io::StampedPose>& est, MissingFrames mode,
                                      const std::vector<std::uint32_t>& est_maps = {},
                                      double tolerance_s = 0.005);
+
+// The stamps of a sequence's frame list (rgb.txt), in order; errors name the file and line.
+std::vector<double> read_frame_stamps(const std::filesystem::path& frame_list);
+
+// {"frames", "interpolated", "held", "before_first_pose"}: stats.json's `every_frame` counts.
+nlohmann::json to_json(const FilledTrajectory& filled, std::size_t frames);
 
 }  // namespace sp::eval
