@@ -49,6 +49,49 @@ TEST(MotionCheck, ProvenStillPeopleAreKeptWhenTheRestCoversTooLittleOfTheImage) 
   }
 }
 
+// reserve_still_people: the keypoints culled only because they lie on a person proven still are
+// reported apart (the tracker keeps them with its keyframes), exactly those the person's release would
+// keep; a frame that releases the person has none (they are in use), and without the switch none.
+TEST(MotionCheck, KeypointsCulledOnlyAsAStillPersonAreReportedAsReserve) {
+  const Scene s;
+  const Rendered f = test::render(s.planes({0, 0}), Eigen::Isometry3d::Identity());
+  const cv::Rect2f person = test::label_box(f.label, 1);
+  const auto all = test::grid_keypoints(640, 480, 8);
+  std::vector<cv::KeyPoint> poor;  // the person and ~80 others: the fallback releases the person
+  for (std::size_t k = 0; k < all.size(); ++k) {
+    if (person.contains(all[k].pt) || k % 50 == 0) poor.push_back(all[k]);
+  }
+  for (const bool reserve : {true, false}) {
+    MotionCheckConfig cfg;
+    cfg.static_proof_frames = 2;
+    cfg.reserve_still_people = reserve;
+    const DynamicResult rich = test::still_person_frames(cfg, f, person, all, 4);
+    ASSERT_FALSE(rich.still_people_released);
+    if (!reserve) {
+      EXPECT_TRUE(rich.keypoint_reserve.empty());
+      continue;
+    }
+    ASSERT_EQ(rich.keypoint_reserve.size(), all.size());
+    const auto m = static_cast<float>(cfg.box_margin_px);
+    const cv::Rect2f grown(person.x - m, person.y - m, person.width + 2 * m, person.height + 2 * m);
+    int on_person = 0;
+    for (std::size_t k = 0; k < all.size(); ++k) {
+      // Reserve = culled now and kept if released: the person (not depth-separated background).
+      EXPECT_TRUE(!rich.keypoint_reserve[k] || rich.keypoint_dynamic[k]) << k;
+      if (rich.keypoint_reserve[k]) {
+        EXPECT_TRUE(grown.contains(all[k].pt)) << k;
+        ++on_person;
+      }
+    }
+    // A still scene: everything culled is the person, and all of it is reserve.
+    ASSERT_GT(test::count_in(person, all, rich.keypoint_dynamic).flagged, 100);
+    EXPECT_EQ(on_person, rich.culled);
+    const DynamicResult released = test::still_person_frames(cfg, f, person, poor, 4);
+    ASSERT_TRUE(released.still_people_released);
+    EXPECT_TRUE(released.keypoint_reserve.empty());
+  }
+}
+
 // The camera motion is fitted on the points outside the boxes. With few of them (a person filling
 // most of the view) the fit can be off by a centimetre, which moves a close person's points past the
 // residual threshold while the far background stays within it: a still person "moves". One motion

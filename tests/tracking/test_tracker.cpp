@@ -165,6 +165,74 @@ TEST_F(TrackerTest, AJumpIsNotTakenAsTheNextFramesMotion) {
   }
 }
 
+// Moves the features left of x_person (a person proven still, culled) from the frame's features to
+// its reserve, as the front end does with dynamic.motion.reserve_still_people.
+void cull_person(Frame& f, float x_person) {
+  map::FeatureSet kept, person;
+  std::vector<int> kept_rows, person_rows;
+  for (std::size_t i = 0; i < f.features.size(); ++i) {
+    const bool on_person = f.features.keypoints[i].pt.x < x_person;
+    map::FeatureSet& to = on_person ? person : kept;
+    to.keypoints.push_back(f.features.keypoints[i]);
+    to.depth.push_back(f.features.depth[i]);
+    to.u_right.push_back(f.features.u_right[i]);
+    (on_person ? person_rows : kept_rows).push_back(static_cast<int>(i));
+  }
+  const auto rows_of = [&](const std::vector<int>& rows) {
+    cv::Mat d(static_cast<int>(rows.size()), 32, CV_8U);
+    for (std::size_t r = 0; r < rows.size(); ++r)
+      f.features.descriptors.row(rows[r]).copyTo(d.row(static_cast<int>(r)));
+    return d;
+  };
+  kept.descriptors = rows_of(kept_rows);
+  person.descriptors = rows_of(person_rows);
+  f.culled = person.size();
+  f.features = std::move(kept);
+  f.reserve = std::move(person);
+}
+
+// The last resort (docs/dynamic.md, "A last resort is never mapped"): a person proven still fills
+// most of the view and is culled; while the rest of the image suffices, keyframes keep the person's
+// features aside. When the rest no longer holds the pose (a sliver at the image's edge, under
+// min_inliers features), the frame is tracked again with the person, whose features the keyframes
+// kept are mapped first: every frame keeps an exact pose. Without the retry those frames are lost.
+TEST_F(TrackerTest, AFrameLostWithoutAStillPersonIsTrackedAgainWithIt) {
+  const auto frame_at = [&](std::size_t i) {
+    Frame f = testing::synthetic_frame(scene_, path_pose(i), i, cam_, depth_.bf);
+    if (i >= 10) cull_person(f, i < 20 ? 320.f : 610.f);  // half the view, then all but a sliver
+    return f;
+  };
+  ASSERT_LT(frame_at(20).features.size(), static_cast<std::size_t>(config_.min_inliers));
+  for (const bool retry : {true, false}) {
+    map::Map map;
+    config_.still_people_retry = retry;
+    Tracker t(map, config_, cam_, depth_, pyramid_, 30.0);
+    std::size_t lost = 0;
+    for (std::size_t i = 0; i < 30; ++i) {
+      Frame f = frame_at(i);
+      lost += t.track(f, {}).state == TrackingState::Ok ? 0 : 1;
+    }
+    if (!retry) {
+      EXPECT_GT(lost, 0u) << "the sliver alone must not hold the pose, or this test proves nothing";
+      continue;
+    }
+    EXPECT_EQ(lost, 0u);
+    EXPECT_GE(t.reserve_stats().tracker_releases, 1u);
+    EXPECT_EQ(t.reserve_stats().tracker_releases_tracked, t.reserve_stats().tracker_releases);
+    EXPECT_GT(t.reserve_stats().points, 0u) << "no keyframe between frames 10 and 19 kept the person";
+    map::MapView view = map.view();
+    for (std::size_t i = 20; i < 30; ++i) {
+      std::optional<geo::SE3> T_wc;
+      for (const auto& p : t.trajectory().resolve(view))
+        if (std::abs(p.stamp - static_cast<double>(i) / 30.0) < 1e-9) T_wc = p.T_wc;
+      ASSERT_TRUE(T_wc.has_value()) << "frame " << i;
+      const PoseDeviation d = pose_deviation(T_wc->inverse(), path_pose(i));
+      EXPECT_LT(d.translation_m, 1e-3) << "frame " << i;
+      EXPECT_LT(d.rotation_deg, 0.02) << "frame " << i;
+    }
+  }
+}
+
 TEST_F(TrackerTest, ReportsHowLongEachFrameHeldTheMapLock) {
   auto t = make_tracker();
   for (std::size_t i = 0; i < 10; ++i) {

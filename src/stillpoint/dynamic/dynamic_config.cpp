@@ -56,6 +56,7 @@ MotionCheckConfig MotionCheckConfig::from_yaml(const ConfigReader& r) {
   r.read("static_proof_frames", c.static_proof_frames, 0, 1000);
   r.read("still_people_fallback_keypoints", c.still_people_fallback_keypoints, 0, 100000);
   r.read("still_people_fallback_coverage", c.still_people_fallback_coverage, 0.0, 1.0);
+  r.read("reserve_still_people", c.reserve_still_people);
   r.read("joint_fit_still", c.joint_fit_still);
   r.read("joint_fit_max_change_m", c.joint_fit_max_change_m, 0.0, 1.0);
   r.read("joint_fit_max_change_deg", c.joint_fit_max_change_deg, 0.0, 45.0);

@@ -629,6 +629,21 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
     }
     classify();
     res.still_people_released = true;
+  } else if (any_still && cfg_.reserve_still_people) {
+    // What a release would keep: classified again with the still people static, then restored.
+    const std::vector<bool> culled = res.keypoint_dynamic;
+    const std::vector<bool> suspect = res.keypoint_suspect;
+    const std::vector<bool> box_dynamic = res.box_dynamic;
+    const int culled_count = res.culled;
+    for (std::size_t b = 0; b < res.boxes.size(); ++b)
+      if (still_person[b]) res.box_dynamic[b] = false;
+    classify();
+    res.keypoint_reserve.assign(n_kp, false);
+    for (std::size_t k = 0; k < n_kp; ++k) res.keypoint_reserve[k] = culled[k] && !res.keypoint_dynamic[k];
+    res.keypoint_dynamic = culled;
+    res.keypoint_suspect = suspect;
+    res.box_dynamic = box_dynamic;
+    res.culled = culled_count;
   }
   if (any_still)
     spdlog::debug("frame {}: proven-still people {}", in.frame_index, poor ? "released" : "culled");

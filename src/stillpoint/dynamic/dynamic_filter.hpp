@@ -85,6 +85,11 @@ struct MotionCheckConfig {
   // image: many keypoints in one strip beside a person filling the view pin the pose poorly [0, 1];
   // 0 = the count alone.
   double still_people_fallback_coverage = 0.3;
+  // Keypoints culled only because they lie on a person proven still are reported apart
+  // (DynamicResult::keypoint_reserve): the tracker keeps them with its keyframes and maps them once the
+  // fallback releases the people, so a release finds map points on them (docs/dynamic.md, "A last
+  // resort is never mapped"). false = a released person has no map points until the next keyframe.
+  bool reserve_still_people = false;
   // A box the camera-motion fit (on the points outside the boxes) calls moving is re-checked: when one
   // camera motion refitted on the fit's inliers and the box's points at the object's depth together
   // keeps both within the residual threshold, the box moved only as much as the fit erred (a person
@@ -175,7 +180,10 @@ struct DynamicResult {
   bool ego_motion_rejected = false;    // most fitted points moved: flow decided nothing (max_moving_share)
   int culled = 0;                      // keypoints marked dynamic
   bool still_people_released = false;  // people proven still were kept: too few keypoints without them
-  double ms = 0;                       // wall time of process()
+  // Per input keypoint (empty = none): culled only because it lies on a person proven still; kept if
+  // the people were released (reserve_still_people).
+  std::vector<bool> keypoint_reserve;
+  double ms = 0;  // wall time of process()
 };
 
 class DynamicFeatureFilter {

@@ -122,6 +122,32 @@ PointId MapView::add_point(MapPoint p) {
   return id;
 }
 
+std::optional<std::size_t> MapView::append_features(KeyframeId kid, const FeatureSet& extra,
+                                                    cv::Size image_size) {
+  Keyframe* kf = keyframe(kid);
+  if (kf == nullptr || kf->bad) return std::nullopt;
+  if (extra.descriptors.rows != static_cast<int>(extra.size()) || extra.depth.size() != extra.size() ||
+      extra.u_right.size() != extra.size() || kf->points.size() != kf->features.size())
+    throw Error("map: append_features with inconsistent feature arrays");
+  const std::size_t first = kf->features.size();
+  if (extra.size() == 0) return first;
+  FeatureSet& f = kf->features;
+  f.keypoints.insert(f.keypoints.end(), extra.keypoints.begin(), extra.keypoints.end());
+  f.depth.insert(f.depth.end(), extra.depth.begin(), extra.depth.end());
+  f.u_right.insert(f.u_right.end(), extra.u_right.begin(), extra.u_right.end());
+  // A new buffer: copies of the old descriptors other stages hold stay as they were.
+  cv::Mat descriptors;
+  if (f.descriptors.empty()) {
+    descriptors = extra.descriptors.clone();
+  } else {
+    cv::vconcat(f.descriptors, extra.descriptors, descriptors);
+  }
+  f.descriptors = descriptors;
+  kf->points.resize(f.size(), kNoPoint);
+  kf->index = make_feature_grid(f.keypoints, image_size.width, image_size.height);
+  return first;
+}
+
 void MapView::add_observation(PointId pid, KeyframeId kid, int feature) {
   MapPoint* p = point(pid);
   Keyframe* kf = keyframe(kid);

@@ -10,6 +10,7 @@
 #include <atomic>
 #include <chrono>
 #include <mutex>
+#include <optional>
 #include <unordered_map>
 #include <utility>
 #include <vector>
@@ -101,6 +102,11 @@ class MapView : public MapReader {
   KeyframeId add_keyframe(Keyframe kf);  // assigns the id; observations of kf.points are added
   PointId add_point(MapPoint p);         // assigns the id
 
+  // Appends features to a live keyframe (features seen when it was made, mapped later); their point
+  // slots start empty and the keyframe's grid is rebuilt over an image_size image. Returns the index of
+  // the first appended feature, or nothing when the keyframe is missing or culled. Features already
+  // there keep their indices, so observations and copies other stages hold stay valid.
+  std::optional<std::size_t> append_features(KeyframeId kf, const FeatureSet& extra, cv::Size image_size);
   void add_observation(PointId p, KeyframeId kf, int feature);
   void erase_observation(PointId p, KeyframeId kf);
   void erase_point(PointId p);  // marks bad and detaches from keyframes

@@ -157,6 +157,7 @@ CullingOutput DynamicCulling::process(const io::FrameData& data, const cv::Mat& 
   out.result = filter_->process(in);
   out.drop = out.result.keypoint_dynamic;
   out.suspect = out.result.keypoint_suspect;
+  out.reserve = out.result.keypoint_reserve;
   prev_gray_ = gray;
   return out;
 }

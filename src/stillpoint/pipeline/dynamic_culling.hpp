@@ -82,6 +82,7 @@ struct DynamicConfig {
 struct CullingOutput {
   std::vector<bool> drop;     // per keypoint
   std::vector<bool> suspect;  // per keypoint: kept but near a detected object (pose guard)
+  std::vector<bool> reserve;  // per keypoint (empty = none): dropped only as a person proven still
   dyn::DynamicResult result;
   double detector_ms = 0;  // inference time of the detection used (0 when none)
   bool detection_used = false;

@@ -56,7 +56,8 @@ std::size_t FrontEnd::refill(ExtractedFeatures& features, std::vector<bool>& dro
 }
 
 track::Frame FrontEnd::assemble(const io::FrameData& data, ExtractedFeatures features,
-                                const std::vector<bool>& drop, const std::vector<bool>& suspect) const {
+                                const std::vector<bool>& drop, const std::vector<bool>& suspect,
+                                const std::vector<bool>& reserve) const {
   track::Frame frame;
   frame.index = data.index;
   frame.stamp = data.stamp;
@@ -82,6 +83,21 @@ track::Frame FrontEnd::assemble(const io::FrameData& data, ExtractedFeatures fea
   frame.features.keypoints = track::undistort_keypoints(raw, camera_);
   frame.features.descriptors = descriptors;
   track::attach_depth(frame.features, raw, data.depth, depth_);
+  std::vector<cv::KeyPoint> raw_reserve;
+  std::vector<int> reserve_rows;
+  for (std::size_t i = 0; i < features.keypoints.size() && i < reserve.size(); ++i) {
+    if (!reserve[i] || i >= drop.size() || !drop[i]) continue;
+    raw_reserve.push_back(features.keypoints[i]);
+    reserve_rows.push_back(static_cast<int>(i));
+  }
+  if (!reserve_rows.empty()) {
+    cv::Mat reserve_desc(static_cast<int>(reserve_rows.size()), 32, CV_8U);
+    for (std::size_t r = 0; r < reserve_rows.size(); ++r)
+      features.descriptors.row(reserve_rows[r]).copyTo(reserve_desc.row(static_cast<int>(r)));
+    frame.reserve.keypoints = track::undistort_keypoints(raw_reserve, camera_);
+    frame.reserve.descriptors = reserve_desc;
+    track::attach_depth(frame.reserve, raw_reserve, data.depth, depth_);
+  }
   frame.gray = features.gray;
   cv::resize(data.bgr, frame.thumbnail, cv::Size(320, 240), 0, 0, cv::INTER_AREA);
   return frame;

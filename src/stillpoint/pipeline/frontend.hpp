@@ -27,9 +27,10 @@ class FrontEnd {
                      const std::vector<cv::Rect2f>& dynamic_boxes,
                      const feat::OrbExtractor::AgainOptions& options = {});
   // Builds the tracker's frame; features flagged in `drop` (dynamic) are removed, those flagged in
-  // `suspect` (kept, but near a detected object) are marked for the tracker's pose guard.
+  // `suspect` (kept, but near a detected object) are marked for the tracker's pose guard. Dropped
+  // features flagged in `reserve` (on a person proven still) go to the frame's reserve set.
   track::Frame assemble(const io::FrameData& data, ExtractedFeatures features, const std::vector<bool>& drop,
-                        const std::vector<bool>& suspect = {}) const;
+                        const std::vector<bool>& suspect = {}, const std::vector<bool>& reserve = {}) const;
   [[nodiscard]] map::ScalePyramid pyramid() const;
 
  private:

@@ -314,7 +314,7 @@ FrameReport SlamSystem::process(const io::FrameData& data) {
   Stopwatch watch;
   ExtractedFeatures features = frontend_.extract(data);
   times_.add("extract", watch.elapsed_ms());
-  std::vector<bool> dynamic, suspect;
+  std::vector<bool> dynamic, suspect, reserve;
   CullingOutput culled;
   if (culling_.enabled()) {
     watch.restart();
@@ -325,6 +325,7 @@ FrameReport SlamSystem::process(const io::FrameData& data) {
     if (culled.result.ego_motion_rejected) ++ego_motion_rejected_;
     dynamic = std::move(culled.drop);
     suspect = std::move(culled.suspect);
+    reserve = std::move(culled.reserve);
   }
   std::vector<cv::Point2f> culled_points;
   for (std::size_t i = 0; i < dynamic.size() && i < features.keypoints.size(); ++i)
@@ -347,7 +348,7 @@ FrameReport SlamSystem::process(const io::FrameData& data) {
     refilled_total_ += frontend_.refill(features, dynamic, suspect, boxes, again);
     times_.add("refill", watch.elapsed_ms());
   }
-  track::Frame frame = frontend_.assemble(data, std::move(features), dynamic, suspect);
+  track::Frame frame = frontend_.assemble(data, std::move(features), dynamic, suspect, reserve);
   culled_total_ += frame.culled;
 
   watch.restart();
@@ -490,6 +491,11 @@ nlohmann::json SlamSystem::statistics() {
                      {"moves_over_10cm", ba.moves_over_10cm}};
   }
   j["new_points_moving"] = tracker_.new_points_moving();
+  j["still_people_reserve"] = {
+      {"releases", tracker_.reserve_stats().releases},
+      {"points", tracker_.reserve_stats().points},
+      {"tracker_releases", tracker_.reserve_stats().tracker_releases},
+      {"tracker_releases_tracked", tracker_.reserve_stats().tracker_releases_tracked}};
   j["subpixel"] = {{"enabled", config_.tracker.subpixel.enabled},
                    {"frames", tracker_.subpixel_stats().frames},
                    {"candidates", tracker_.subpixel_stats().candidates},

@@ -27,6 +27,10 @@ struct Frame {
   // Per feature: kept by dynamic culling but in or near a detected object or a moving flow point
   // (empty = none). The pose guard re-solves without them when the pose jumps.
   std::vector<bool> suspect;
+  // Features culled only because they lie on people proven still (empty unless
+  // dynamic.motion.reserve_still_people): kept with a keyframe made from this frame; the tracker adds
+  // them (and maps recent keyframes' reserves) only when the frame cannot be tracked without them.
+  map::FeatureSet reserve;
   geo::SE3 T_cw;
   bool has_pose = false;
   map::KeyframeId reference = map::kNoKeyframe;

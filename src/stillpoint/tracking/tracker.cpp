@@ -32,6 +32,9 @@ TrackerConfig TrackerConfig::from_yaml(const ConfigReader& r) {
   r.read("motion_break_deg", c.motion_break_deg, 0.01, 180.0);
   r.read("new_map_after_lost_frames", c.new_map_after_lost_frames, 0, 100000);
   r.read("merge_search_interval", c.merge_search_interval, 1, 10000);
+  r.read("still_people_reserve_keyframes", c.still_people_reserve_keyframes, 0, 100);
+  r.read("still_people_reserve_max_age_frames", c.still_people_reserve_max_age_frames, 1, 100000);
+  r.read("still_people_retry", c.still_people_retry);
   c.pose = opt::PoseOptimizerConfig::from_yaml(r.section("pose_optimizer"));
   c.keyframes = KeyframePolicyConfig::from_yaml(r.section("keyframes"));
   c.guard = PoseGuardConfig::from_yaml(r.section("pose_guard"));
@@ -129,9 +132,13 @@ TrackOutcome Tracker::track_frame(Frame& frame, const MappingStatus& mapping) {
     motion_prior_ = predicted;
     bool relocalized = false;
     why_lost_.clear();
-    if (state_ == TrackingState::Ok) {
+    // Tracked: by the motion model or the reference keyframe, then the local map.
+    const auto track_tracked = [&] {
       if (velocity_) ok = by_motion = track_motion_model(frame);
       if (!ok) ok = track_reference_keyframe(frame);
+    };
+    if (state_ == TrackingState::Ok) {
+      track_tracked();
     } else {
       ++reloc_stats_.attempts;
       ok = relocalized = relocalize(frame);
@@ -141,6 +148,18 @@ TrackOutcome Tracker::track_frame(Frame& frame, const MappingStatus& mapping) {
       }
     }
     if (ok) ok = track_local_map(frame);
+    if (!ok && state_ == TrackingState::Ok && release_reserve(frame)) {
+      // The last resort: the frame tracks again with the people proven still, which it culled.
+      counters_.clear();
+      by_motion = false;
+      track_tracked();
+      if (ok) ok = track_local_map(frame);
+      ++reserve_stats_.tracker_releases;
+      reserve_stats_.tracker_releases_tracked += ok ? 1 : 0;
+      spdlog::debug("frame {}: tracked again with the still people: {}", frame.index,
+                    ok ? "tracked" : "lost");
+      if (!ok) why_lost_ += " also with the still people;";
+    }
     if (ok && relocalized) {
       ++reloc_stats_.poses_found;
       out.relocalized = true;
@@ -687,7 +706,80 @@ map::KeyframeId Tracker::create_keyframe(map::MapView& view, Frame& frame, Keyfr
   view.update_connections(kid);
   reference_ = kid;
   last_keyframe_frame_ = frame.index;
+  if (config_.still_people_reserve_keyframes > 0 && frame.reserve.size() > 0) {
+    reserves_.push_back({kid, frame.index, frame.reserve});
+    while (reserves_.size() > static_cast<std::size_t>(config_.still_people_reserve_keyframes))
+      reserves_.pop_front();
+  }
   return kid;
+}
+
+bool Tracker::release_reserve(Frame& frame) {
+  if (!config_.still_people_retry) return false;
+  // Mapped only now, when the frame cannot be tracked without them: people are a last resort.
+  const std::size_t mapped = reserves_.empty() ? 0 : map_reserve(frame);
+  if (frame.reserve.size() == 0) return mapped > 0;
+  map::FeatureSet& f = frame.features;
+  const std::size_t before = f.size();
+  const map::FeatureSet& r = frame.reserve;
+  f.keypoints.insert(f.keypoints.end(), r.keypoints.begin(), r.keypoints.end());
+  f.depth.insert(f.depth.end(), r.depth.begin(), r.depth.end());
+  f.u_right.insert(f.u_right.end(), r.u_right.begin(), r.u_right.end());
+  cv::Mat descriptors;
+  if (f.descriptors.empty()) {
+    descriptors = r.descriptors.clone();
+  } else {
+    cv::vconcat(f.descriptors, r.descriptors, descriptors);
+  }
+  f.descriptors = descriptors;
+  // People in use are suspects for the pose guard, as when the motion check releases them.
+  frame.suspect.resize(before, false);
+  frame.suspect.resize(f.size(), true);
+  frame.culled -= std::min(frame.culled, r.size());
+  frame.reserve = {};
+  frame.grid = map::make_feature_grid(f.keypoints, camera_.width, camera_.height);
+  frame.reset_matches();
+  refined_.assign(f.size(), false);
+  return true;
+}
+
+std::size_t Tracker::map_reserve(const Frame& frame) {
+  map::MapView view = map_.view(&lock_clock_);
+  std::size_t points = 0, keyframes = 0;
+  for (const Reserve& r : reserves_) {
+    if (frame.index > r.frame_index + static_cast<std::size_t>(config_.still_people_reserve_max_age_frames))
+      continue;
+    const map::Keyframe* kf = view.keyframe(r.keyframe);
+    if (kf == nullptr || kf->bad || kf->map_id != current_map_) continue;
+    // The keyframe's pose now (bundle adjustment may have moved it since it was made).
+    const geo::SE3 T_wc = kf->T_cw.inverse();
+    const std::optional<std::size_t> first =
+        view.append_features(r.keyframe, r.features, cv::Size(camera_.width, camera_.height));
+    if (!first) continue;
+    ++keyframes;
+    for (std::size_t i = 0; i < r.features.size(); ++i) {
+      const float d = r.features.depth[i];
+      if (d <= 0) continue;
+      const auto& kp = r.features.keypoints[i];
+      map::MapPoint p;
+      p.position = T_wc * camera_.unproject({kp.pt.x, kp.pt.y}, d);
+      p.descriptor = r.features.descriptors.row(static_cast<int>(i)).clone();
+      p.reference = r.keyframe;
+      p.first_keyframe = r.keyframe;
+      const map::PointId pid = view.add_point(std::move(p));
+      view.add_observation(pid, r.keyframe, static_cast<int>(*first + i));
+      view.update_point_normal_and_depth(pid, pyramid_);
+      ++points;
+    }
+  }
+  reserves_.clear();  // mapped, or too old to trust
+  if (points > 0) {
+    ++reserve_stats_.releases;
+    reserve_stats_.points += points;
+  }
+  spdlog::debug("frame {}: still people released, {} reserve points mapped in {} keyframes", frame.index,
+                points, keyframes);
+  return points;
 }
 
 }  // namespace sp::track

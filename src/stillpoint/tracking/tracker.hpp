@@ -4,6 +4,7 @@
 // optimisation, the sub-pixel refiner and the pose guard work on a LocalMapSnapshot copied under
 // short MapReaders; counters and keyframes are written back under one MapView at the end of the
 // frame. Relocalisation (rare) searches under one view.
+#include <deque>
 #include <functional>
 #include <memory>
 #include <optional>
@@ -63,6 +64,18 @@ struct TrackerConfig {
   // While several maps are open, a trusted frame looks for the other maps only every this many frames
   // (the search holds the map lock ~10-50 ms); a candidate found is then verified on every frame. 1: always.
   int merge_search_interval = 5;
+  // The features of people proven still that the last this many keyframes were made without
+  // (Frame::reserve) are kept; when a frame cannot be tracked without the people (still_people_retry),
+  // they are added to their keyframes and made map points from depth (docs/dynamic.md, "A last resort
+  // is never mapped"). 0 = none kept [0, 100].
+  int still_people_reserve_keyframes = 5;
+  // ... only those kept within this many frames before the release: a person still now may have
+  // stood elsewhere before [1, 100000].
+  int still_people_reserve_max_age_frames = 90;
+  // A frame that loses tracking without the people proven still it culled is tracked again with them
+  // (their reserve features added to the frame, recent keyframes' reserves mapped first): the tracker,
+  // not a keypoint count, decides that the rest is too poor.
+  bool still_people_retry = true;
   opt::PoseOptimizerConfig pose;
   KeyframePolicyConfig keyframes;
   PoseGuardConfig guard;
@@ -152,6 +165,14 @@ class Tracker {
   [[nodiscard]] std::size_t motion_breaks() const { return motion_breaks_; }
   // Keyframe candidates for new points whose flow disagreed with the tracked motion (not made points).
   [[nodiscard]] std::size_t new_points_moving() const { return new_points_moving_; }
+  // Still people's reserve features mapped when a frame could not be tracked without them.
+  struct ReserveStats {
+    std::size_t releases = 0;                  // frames that mapped keyframes' reserve features
+    std::size_t points = 0;                    // map points made from them
+    std::size_t tracker_releases = 0;          // frames lost without the still people, tried again with them
+    std::size_t tracker_releases_tracked = 0;  // ... and tracked then
+  };
+  [[nodiscard]] const ReserveStats& reserve_stats() const { return reserve_stats_; }
   [[nodiscard]] const AnchorRefinerStats& subpixel_stats() const { return refiner_.stats(); }
   [[nodiscard]] const TrajectoryRecorder& trajectory() const { return trajectory_; }
   [[nodiscard]] const KeyframePolicy& policy() const { return *policy_; }
@@ -163,6 +184,11 @@ class Tracker {
   // Writes the tracked frame's pose relative to its reference keyframe (held back while verifying).
   void record_pose(Frame& frame, const geo::SE3& reference_T_cw, TrackOutcome& out);
   bool initialize(map::MapView& view, Frame& frame);
+  // The reserve features kept with recent keyframes become map points; returns how many.
+  std::size_t map_reserve(const Frame& frame);
+  // A frame lost without the people proven still: adds its reserve features (the people) to its
+  // features and maps the keyframes' reserves; false when neither adds anything (or the retry is off).
+  bool release_reserve(Frame& frame);
   bool track_motion_model(Frame& frame);
   bool track_reference_keyframe(Frame& frame);
   bool relocalize(Frame& frame);
@@ -278,6 +304,13 @@ class Tracker {
   std::size_t motion_breaks_ = 0;
   NewPointMotionCheck new_point_check_;
   std::size_t new_points_moving_ = 0;
+  struct Reserve {
+    map::KeyframeId keyframe = map::kNoKeyframe;
+    std::size_t frame_index = 0;
+    map::FeatureSet features;  // the frame's Frame::reserve
+  };
+  std::deque<Reserve> reserves_;  // oldest first, at most still_people_reserve_keyframes
+  ReserveStats reserve_stats_;
   AnchorRefiner refiner_;
   std::vector<bool> refined_;      // per feature of the frame being tracked: position aligned with the anchor
   LocalMapSnapshot snapshot_;      // the map records this frame reads, copied under short readers
