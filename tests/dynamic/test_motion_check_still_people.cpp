@@ -92,6 +92,32 @@ TEST(MotionCheck, KeypointsCulledOnlyAsAStillPersonAreReportedAsReserve) {
   }
 }
 
+// A still vote proves a person still only when it was taken over enough points: a proof asked over
+// more points than the box holds never comes, so the person stays unproven (culled, never released);
+// asked over fewer, the proof comes as before.
+TEST(MotionCheck, AStillVoteOverTooFewPointsIsNoProof) {
+  const Scene s;
+  const Rendered f = test::render(s.planes({0, 0}), Eigen::Isometry3d::Identity());
+  const cv::Rect2f person = test::label_box(f.label, 1);
+  const auto all = test::grid_keypoints(640, 480, 8);
+  std::vector<cv::KeyPoint> poor;  // the person and ~80 others: a proven-still person is released
+  for (std::size_t k = 0; k < all.size(); ++k) {
+    if (person.contains(all[k].pt) || k % 50 == 0) poor.push_back(all[k]);
+  }
+  for (const int needed : {5, 1000}) {
+    MotionCheckConfig cfg;
+    cfg.static_proof_frames = 2;
+    cfg.min_points_to_prove_still = needed;
+    const DynamicResult r = test::still_person_frames(cfg, f, person, poor, 4);
+    const test::InRect on_person = test::count_in(person, poor, r.keypoint_dynamic);
+    ASSERT_GT(on_person.total, 100);
+    const bool proven = needed == 5;
+    EXPECT_EQ(r.still_people_released, proven) << needed;
+    EXPECT_EQ(r.box_dynamic.at(0), !proven) << needed;
+    EXPECT_EQ(on_person.flagged, proven ? 0 : on_person.total) << needed;
+  }
+}
+
 // The camera motion is fitted on the points outside the boxes. With few of them (a person filling
 // most of the view) the fit can be off by a centimetre, which moves a close person's points past the
 // residual threshold while the far background stays within it: a still person "moves". One motion

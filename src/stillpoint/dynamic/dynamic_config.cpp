@@ -54,6 +54,7 @@ MotionCheckConfig MotionCheckConfig::from_yaml(const ConfigReader& r) {
   r.read("always_dynamic_classes", c.always_dynamic_classes);
   r.read("dynamic_hold_frames", c.dynamic_hold_frames, 0, 1000);
   r.read("static_proof_frames", c.static_proof_frames, 0, 1000);
+  r.read("min_points_to_prove_still", c.min_points_to_prove_still, 1, 1000);
   r.read("still_people_fallback_keypoints", c.still_people_fallback_keypoints, 0, 100000);
   r.read("still_people_fallback_coverage", c.still_people_fallback_coverage, 0.0, 1.0);
   r.read("reserve_still_people", c.reserve_still_people);

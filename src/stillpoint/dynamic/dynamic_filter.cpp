@@ -456,6 +456,11 @@ DynamicResult DynamicFeatureFilter::process(const DynamicInput& in) {
                  ? Seen::kMoving
                  : Seen::kStill;
     }
+    // A person's still vote over few points is no proof (a handful of flow points on a walker can all
+    // lie within the threshold): it counts as undecided, neither extending nor breaking the streak.
+    if (seen == Seen::kStill && always && cfg_.static_proof_frames > 0 &&
+        total < cfg_.min_points_to_prove_still)
+      seen = Seen::kUndecided;
     if (seen == Seen::kMoving && cfg_.joint_fit_still && ego &&
         static_cast<int>(depth_members.size()) >= cfg_.min_points_to_decide &&
         explained_by_camera(*in.K, ego->motion, *ego, res.flow_prev, ego_fit_inliers, depth_members)) {

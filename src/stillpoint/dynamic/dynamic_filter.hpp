@@ -77,6 +77,9 @@ struct MotionCheckConfig {
   // found it static in this many consecutive frames (a person is moving unless shown still). 0 = the
   // box is static until seen moving (the paper's literal reading, docs/dynamic.md) [0, 1000].
   int static_proof_frames = 8;
+  // A still vote proves a person still only over at least this many points (fewer: undecided, the
+  // streak neither grows nor breaks); at most min_points_to_decide = every decided vote counts [1, 1000].
+  int min_points_to_prove_still = 5;
   // A person proven still is culled too unless fewer than this many keypoints would remain: people are
   // a last resort, used only when the rest of the image is too poor to track [0, 100000]. 0 = still
   // people are always culled; a value above the keypoint count = always kept (the paper's reading).
