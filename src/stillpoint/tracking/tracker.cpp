@@ -149,8 +149,11 @@ TrackOutcome Tracker::track_frame(Frame& frame, const MappingStatus& mapping) {
     }
     if (ok) ok = track_local_map(frame);
     if (!ok && state_ == TrackingState::Ok && release_reserve(frame)) {
-      // The last resort: the frame tracks again with the people proven still, which it culled.
+      // The last resort: the frame tracks again with the people proven still, which it culled, from
+      // scratch (no match of the failed attempt carried over).
       counters_.clear();
+      frame.reset_matches();
+      refined_.assign(frame.features.size(), false);
       by_motion = false;
       track_tracked();
       if (ok) ok = track_local_map(frame);
@@ -738,8 +741,6 @@ bool Tracker::release_reserve(Frame& frame) {
   frame.culled -= std::min(frame.culled, r.size());
   frame.reserve = {};
   frame.grid = map::make_feature_grid(f.keypoints, camera_.width, camera_.height);
-  frame.reset_matches();
-  refined_.assign(f.size(), false);
   return true;
 }
 
