@@ -18,6 +18,19 @@ ScalePyramid ScalePyramid::make(int levels, double scale_factor) {
   return p;
 }
 
+void append(FeatureSet& to, const FeatureSet& extra) {
+  to.keypoints.insert(to.keypoints.end(), extra.keypoints.begin(), extra.keypoints.end());
+  to.depth.insert(to.depth.end(), extra.depth.begin(), extra.depth.end());
+  to.u_right.insert(to.u_right.end(), extra.u_right.begin(), extra.u_right.end());
+  cv::Mat descriptors;
+  if (to.descriptors.empty()) {
+    descriptors = extra.descriptors.clone();
+  } else {
+    cv::vconcat(to.descriptors, extra.descriptors, descriptors);
+  }
+  to.descriptors = descriptors;
+}
+
 feat::FeatureGrid make_feature_grid(const std::vector<cv::KeyPoint>& keypoints, int width, int height) {
   std::vector<cv::Point2f> points;
   std::vector<int> octaves;

@@ -26,6 +26,10 @@ struct FeatureSet {
   [[nodiscard]] std::size_t size() const { return keypoints.size(); }
 };
 
+// Appends `extra` to `to`, in order. The descriptors go to a new buffer, so copies of `to`'s old
+// descriptors that others hold stay as they were.
+void append(FeatureSet& to, const FeatureSet& extra);
+
 // The features module's grid over a frame's keypoints, for "features near (u, v)" queries.
 feat::FeatureGrid make_feature_grid(const std::vector<cv::KeyPoint>& keypoints, int width, int height);
 

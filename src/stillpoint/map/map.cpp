@@ -131,20 +131,9 @@ std::optional<std::size_t> MapView::append_features(KeyframeId kid, const Featur
     throw Error("map: append_features with inconsistent feature arrays");
   const std::size_t first = kf->features.size();
   if (extra.size() == 0) return first;
-  FeatureSet& f = kf->features;
-  f.keypoints.insert(f.keypoints.end(), extra.keypoints.begin(), extra.keypoints.end());
-  f.depth.insert(f.depth.end(), extra.depth.begin(), extra.depth.end());
-  f.u_right.insert(f.u_right.end(), extra.u_right.begin(), extra.u_right.end());
-  // A new buffer: copies of the old descriptors other stages hold stay as they were.
-  cv::Mat descriptors;
-  if (f.descriptors.empty()) {
-    descriptors = extra.descriptors.clone();
-  } else {
-    cv::vconcat(f.descriptors, extra.descriptors, descriptors);
-  }
-  f.descriptors = descriptors;
-  kf->points.resize(f.size(), kNoPoint);
-  kf->index = make_feature_grid(f.keypoints, image_size.width, image_size.height);
+  append(kf->features, extra);  // new descriptor buffer: copies other stages hold stay as they were
+  kf->points.resize(kf->features.size(), kNoPoint);
+  kf->index = make_feature_grid(kf->features.keypoints, image_size.width, image_size.height);
   return first;
 }
 

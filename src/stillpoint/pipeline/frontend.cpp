@@ -55,6 +55,22 @@ std::size_t FrontEnd::refill(ExtractedFeatures& features, std::vector<bool>& dro
   return extra.size();
 }
 
+map::FeatureSet FrontEnd::subset(const ExtractedFeatures& features, const std::vector<int>& rows,
+                                 const cv::Mat& depth) const {
+  map::FeatureSet out;
+  std::vector<cv::KeyPoint> raw;
+  raw.reserve(rows.size());
+  cv::Mat descriptors(static_cast<int>(rows.size()), 32, CV_8U);
+  for (std::size_t r = 0; r < rows.size(); ++r) {
+    raw.push_back(features.keypoints[static_cast<std::size_t>(rows[r])]);
+    features.descriptors.row(rows[r]).copyTo(descriptors.row(static_cast<int>(r)));
+  }
+  out.keypoints = track::undistort_keypoints(raw, camera_);
+  out.descriptors = descriptors;
+  track::attach_depth(out, raw, depth, depth_);
+  return out;
+}
+
 track::Frame FrontEnd::assemble(const io::FrameData& data, ExtractedFeatures features,
                                 const std::vector<bool>& drop, const std::vector<bool>& suspect,
                                 const std::vector<bool>& reserve) const {
@@ -62,42 +78,22 @@ track::Frame FrontEnd::assemble(const io::FrameData& data, ExtractedFeatures fea
   frame.index = data.index;
   frame.stamp = data.stamp;
   frame.extracted = features.keypoints.size();
-  std::vector<cv::KeyPoint> raw;
-  cv::Mat descriptors;
-  raw.reserve(features.keypoints.size());
-  std::vector<int> rows;
+  std::vector<int> rows, reserve_rows;
+  rows.reserve(features.keypoints.size());
   for (std::size_t i = 0; i < features.keypoints.size(); ++i) {
-    if (i < drop.size() && drop[i]) continue;
-    raw.push_back(features.keypoints[i]);
-    rows.push_back(static_cast<int>(i));
+    if (i >= drop.size() || !drop[i]) {
+      rows.push_back(static_cast<int>(i));
+    } else if (i < reserve.size() && reserve[i]) {
+      reserve_rows.push_back(static_cast<int>(i));
+    }
   }
-  frame.culled = features.keypoints.size() - raw.size();
+  frame.culled = features.keypoints.size() - rows.size();
   if (!suspect.empty()) {
     frame.suspect.reserve(rows.size());
     for (int r : rows) frame.suspect.push_back(static_cast<std::size_t>(r) < suspect.size() && suspect[r]);
   }
-  descriptors.create(static_cast<int>(rows.size()), 32, CV_8U);
-  for (std::size_t r = 0; r < rows.size(); ++r) {
-    features.descriptors.row(rows[r]).copyTo(descriptors.row(static_cast<int>(r)));
-  }
-  frame.features.keypoints = track::undistort_keypoints(raw, camera_);
-  frame.features.descriptors = descriptors;
-  track::attach_depth(frame.features, raw, data.depth, depth_);
-  std::vector<cv::KeyPoint> raw_reserve;
-  std::vector<int> reserve_rows;
-  for (std::size_t i = 0; i < features.keypoints.size() && i < reserve.size(); ++i) {
-    if (!reserve[i] || i >= drop.size() || !drop[i]) continue;
-    raw_reserve.push_back(features.keypoints[i]);
-    reserve_rows.push_back(static_cast<int>(i));
-  }
-  if (!reserve_rows.empty()) {
-    cv::Mat reserve_desc(static_cast<int>(reserve_rows.size()), 32, CV_8U);
-    for (std::size_t r = 0; r < reserve_rows.size(); ++r)
-      features.descriptors.row(reserve_rows[r]).copyTo(reserve_desc.row(static_cast<int>(r)));
-    frame.reserve.keypoints = track::undistort_keypoints(raw_reserve, camera_);
-    frame.reserve.descriptors = reserve_desc;
-    track::attach_depth(frame.reserve, raw_reserve, data.depth, depth_);
-  }
+  frame.features = subset(features, rows, data.depth);
+  if (!reserve_rows.empty()) frame.reserve = subset(features, reserve_rows, data.depth);
   frame.gray = features.gray;
   cv::resize(data.bgr, frame.thumbnail, cv::Size(320, 240), 0, 0, cv::INTER_AREA);
   return frame;

@@ -34,6 +34,9 @@ class FrontEnd {
   [[nodiscard]] map::ScalePyramid pyramid() const;
 
  private:
+  // The features at `rows`: positions undistorted, descriptors copied, depth looked up.
+  [[nodiscard]] map::FeatureSet subset(const ExtractedFeatures& features, const std::vector<int>& rows,
+                                       const cv::Mat& depth) const;
   feat::OrbExtractor extractor_;
   geo::CameraIntrinsics camera_;
   track::DepthModel depth_;

@@ -710,7 +710,7 @@ map::KeyframeId Tracker::create_keyframe(map::MapView& view, Frame& frame, Keyfr
   reference_ = kid;
   last_keyframe_frame_ = frame.index;
   if (config_.still_people_reserve_keyframes > 0 && frame.reserve.size() > 0) {
-    reserves_.push_back({kid, frame.index, frame.reserve});
+    reserves_.push_back({kid, frame.index, std::move(frame.reserve)});  // the frame is done with it
     while (reserves_.size() > static_cast<std::size_t>(config_.still_people_reserve_keyframes))
       reserves_.pop_front();
   }
@@ -722,25 +722,14 @@ bool Tracker::release_reserve(Frame& frame) {
   // Mapped only now, when the frame cannot be tracked without them: people are a last resort.
   const std::size_t mapped = reserves_.empty() ? 0 : map_reserve(frame);
   if (frame.reserve.size() == 0) return mapped > 0;
-  map::FeatureSet& f = frame.features;
-  const std::size_t before = f.size();
-  const map::FeatureSet& r = frame.reserve;
-  f.keypoints.insert(f.keypoints.end(), r.keypoints.begin(), r.keypoints.end());
-  f.depth.insert(f.depth.end(), r.depth.begin(), r.depth.end());
-  f.u_right.insert(f.u_right.end(), r.u_right.begin(), r.u_right.end());
-  cv::Mat descriptors;
-  if (f.descriptors.empty()) {
-    descriptors = r.descriptors.clone();
-  } else {
-    cv::vconcat(f.descriptors, r.descriptors, descriptors);
-  }
-  f.descriptors = descriptors;
+  const std::size_t before = frame.features.size();
+  map::append(frame.features, frame.reserve);
   // People in use are suspects for the pose guard, as when the motion check releases them.
   frame.suspect.resize(before, false);
-  frame.suspect.resize(f.size(), true);
-  frame.culled -= std::min(frame.culled, r.size());
+  frame.suspect.resize(frame.features.size(), true);
+  frame.culled -= std::min(frame.culled, frame.reserve.size());
   frame.reserve = {};
-  frame.grid = map::make_feature_grid(f.keypoints, camera_.width, camera_.height);
+  frame.grid = map::make_feature_grid(frame.features.keypoints, camera_.width, camera_.height);
   return true;
 }
 
