@@ -226,11 +226,49 @@ TEST_F(Atlas, ASavedMapKeepsItsMapsApartWhenLoaded) {
   EXPECT_EQ(again.current_map(), map::MapId{1});
 }
 
+// tracking.young_map_frames: a map lost within that many frames of its start was begun in a view it
+// cannot hold and is not worth waiting for (ORB-SLAM3 drops a lost map of < 10 keyframes); the first
+// frame that fails to relocalise starts a new map.
+TEST_F(Atlas, AMapLostSoonAfterItsStartIsFollowedByANewMapOnTheFirstFrameThatFailsToRelocalise) {
+  config_.young_map_frames = 30;
+  auto t = make_tracker();
+  std::size_t i = 0;
+  for (; i < 4; ++i) ASSERT_EQ(feed(*t, i, 0.02 * static_cast<double>(i)).state, TrackingState::Ok) << i;
+  // Carried away: the first frame is lost, the next one fails to relocalise and starts map 1 at once.
+  EXPECT_EQ(feed(*t, i++, 9.0).state, TrackingState::Lost);
+  EXPECT_EQ(t->atlas_stats().maps_created, 1u);
+  const TrackOutcome started = feed(*t, i++, 8.98);
+  EXPECT_EQ(started.state, TrackingState::Ok);
+  EXPECT_FALSE(started.relocalized);
+  EXPECT_EQ(t->atlas_stats().maps_created, 2u);
+  EXPECT_EQ(t->current_map(), map::MapId{1});
+  EXPECT_EQ(t->lost_frames(), 1u);
+}
+
+TEST_F(Atlas, AMapLostLaterThanTheYoungSpanWaitsForTheConfiguredLoss) {
+  config_.young_map_frames = 30;
+  auto t = make_tracker();
+  std::size_t i = 0;
+  for (; i < 40; ++i) ASSERT_EQ(feed(*t, i, 0.02 * static_cast<double>(i)).state, TrackingState::Ok) << i;
+  double x = 9.0;
+  for (; i < 40 + kLostBeforeNewMap; ++i, x -= 0.02)
+    EXPECT_EQ(feed(*t, i, x).state, TrackingState::Lost) << i;
+  EXPECT_EQ(t->atlas_stats().maps_created, 1u);
+  EXPECT_EQ(feed(*t, i, x).state, TrackingState::Ok);
+  EXPECT_EQ(t->atlas_stats().maps_created, 2u);
+}
+
 TEST(AtlasConfig, KeyIsReadAndRangeChecked) {
   EXPECT_EQ(TrackerConfig{}.new_map_after_lost_frames, 45);
   const TrackerConfig c =
       TrackerConfig::from_yaml(ConfigReader::from_string("new_map_after_lost_frames: 0\n", "tracking.yaml"));
   EXPECT_EQ(c.new_map_after_lost_frames, 0);
+  EXPECT_EQ(TrackerConfig{}.young_map_frames, 30);
+  EXPECT_EQ(
+      TrackerConfig::from_yaml(ConfigReader::from_string("young_map_frames: 0\n", "t.yaml")).young_map_frames,
+      0);
+  EXPECT_THROW(TrackerConfig::from_yaml(ConfigReader::from_string("young_map_frames: -1\n", "t.yaml")),
+               ConfigError);
   EXPECT_THROW(
       TrackerConfig::from_yaml(ConfigReader::from_string("new_map_after_lost_frames: -1\n", "t.yaml")),
       ConfigError);

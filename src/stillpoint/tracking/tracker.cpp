@@ -31,6 +31,7 @@ TrackerConfig TrackerConfig::from_yaml(const ConfigReader& r) {
   r.read("motion_break_m", c.motion_break_m, 0.001, 10.0);
   r.read("motion_break_deg", c.motion_break_deg, 0.01, 180.0);
   r.read("new_map_after_lost_frames", c.new_map_after_lost_frames, 0, 100000);
+  r.read("young_map_frames", c.young_map_frames, 0, 100000);
   r.read("merge_search_interval", c.merge_search_interval, 1, 10000);
   r.read("still_people_reserve_keyframes", c.still_people_reserve_keyframes, 0, 100);
   r.read("still_people_reserve_max_age_frames", c.still_people_reserve_max_age_frames, 1, 100000);
@@ -306,6 +307,7 @@ bool Tracker::initialize(map::MapView& view, Frame& frame) {
   open_maps_ = {map::kFirstMap};
   next_map_ = 1;
   ++atlas_stats_.maps_created;
+  map_started_frame_ = frame.index;
   reference_ = create_keyframe(view, frame, draft_keyframe(frame), config_.init_all_depth_points);
   spdlog::info("map initialised at frame {} with {} points", frame.index, view.live_points());
   return true;

@@ -61,6 +61,11 @@ struct TrackerConfig {
   // the other maps' keyframes and merge the newer map into the older one once the pose is verified
   // (relocalization_verify_frames further frames, the relocalisation limits). 0: never (lost stays lost).
   int new_map_after_lost_frames = 45;
+  // A map this tracker started fewer than this many frames ago is young: when it is lost, the first
+  // frame that fails to relocalise starts a new map instead of waiting new_map_after_lost_frames (a map
+  // lost within a second of its start was begun in a view it cannot hold; ORB-SLAM3 drops a lost map
+  // of < 10 keyframes). 0: never (every map waits).
+  int young_map_frames = 30;
   // While several maps are open, a trusted frame looks for the other maps only every this many frames
   // (the search holds the map lock ~10-50 ms); a candidate found is then verified on every frame. 1: always.
   int merge_search_interval = 5;
@@ -284,9 +289,10 @@ class Tracker {
   std::optional<std::size_t> first_reloc_frame_;
   // Atlas state.
   map::MapId current_map_ = map::kFirstMap;
-  std::uint32_t next_map_ = 0;         // the id the next new map gets
-  std::vector<map::MapId> open_maps_;  // maps not merged into another
-  std::size_t lost_streak_ = 0;        // frames since the last trusted (written) one
+  std::uint32_t next_map_ = 0;                    // the id the next new map gets
+  std::vector<map::MapId> open_maps_;             // maps not merged into another
+  std::optional<std::size_t> map_started_frame_;  // where this tracker started the current map
+  std::size_t lost_streak_ = 0;                   // frames since the last trusted (written) one
   std::optional<geo::SE3> last_trusted_T_cw_;
   struct PendingMerge {
     map::MapId other = map::kFirstMap;

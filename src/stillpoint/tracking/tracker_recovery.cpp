@@ -66,9 +66,11 @@ bool Tracker::relocalize(Frame& frame) {
     const map::MapReader view = map_.reader(&lock_clock_);
     if (const map::Keyframe* kf = view.keyframe(kid); kf != nullptr) found_in = kf->map_id;
   }
-  if (found_in != current_map_)
+  if (found_in != current_map_) {
     spdlog::info("frame {} relocalised in map {} (was tracking in map {})", frame.index,
                  map::to_int(found_in), map::to_int(current_map_));
+    map_started_frame_.reset();  // an older map: not young
+  }
   current_map_ = found_in;
   pending_merge_.reset();
   spdlog::info("relocalised frame {} against keyframe {}", frame.index, kid);
@@ -138,7 +140,13 @@ map::KeyframeId Tracker::locate(Frame& frame, const std::vector<map::KeyframeId>
 
 bool Tracker::new_map_due(const Frame& frame) const {
   if (config_.new_map_after_lost_frames <= 0 || !last_trusted_T_cw_ || verify_left_ > 0) return false;
-  if (lost_streak_ < static_cast<std::size_t>(config_.new_map_after_lost_frames)) return false;
+  if (lost_streak_ < static_cast<std::size_t>(config_.new_map_after_lost_frames)) {
+    // Young when the loss began (the frame after the last trusted one) within young_map_frames of the
+    // map's start.
+    if (!map_started_frame_ || frame.index - lost_streak_ >=
+                                   *map_started_frame_ + static_cast<std::size_t>(config_.young_map_frames))
+      return false;
+  }
   const auto with_depth =
       std::count_if(frame.features.depth.begin(), frame.features.depth.end(), [](float d) { return d > 0; });
   return with_depth >= config_.init_min_features;
@@ -154,6 +162,7 @@ void Tracker::start_new_map(Frame& frame, TrackOutcome& out) {
     frame.T_cw = *last_trusted_T_cw_;
     frame.has_pose = true;
     current_map_ = map::MapId{next_map_++};
+    map_started_frame_ = frame.index;
     open_maps_.push_back(current_map_);
     ++atlas_stats_.maps_created;
     KeyframeDraft draft = draft_keyframe(frame);
@@ -325,6 +334,7 @@ void Tracker::look_for_other_maps(Frame& frame) {
     last_trusted_T_cw_ = *last_trusted_T_cw_ * S_into_from.inverse();
   if (from == current_map_) frame.T_cw = frame.T_cw * S_into_from.inverse();
   std::erase(open_maps_, from);
+  if (into != current_map_) map_started_frame_.reset();
   current_map_ = into;
   ++atlas_stats_.merges;
   map_.notify_big_change();  // BA results computed before the move are dropped; the tracker re-reads
