@@ -258,12 +258,43 @@ TEST_F(Atlas, AMapLostLaterThanTheYoungSpanWaitsForTheConfiguredLoss) {
   EXPECT_EQ(t->atlas_stats().maps_created, 2u);
 }
 
+// tracking.merge_verify_frames: a candidate found at frame c is merged at frame c + merge_verify_frames,
+// each frame between having found the other map where the candidate transform puts it.
+TEST_F(Atlas, AMergeWaitsForItsVerificationFrames) {
+  for (const int verify : {3, 6}) {
+    SCOPED_TRACE(verify);
+    config_.merge_verify_frames = verify;
+    map::Map fresh;
+    auto t = std::make_unique<Tracker>(fresh, config_, cam_, depth_, map::ScalePyramid::make(8, 1.2), 30.0);
+    std::size_t i = 0;
+    for (; i < 40; ++i) ASSERT_EQ(feed(*t, i, 0.02 * static_cast<double>(i)).state, TrackingState::Ok) << i;
+    double x = 9.0;
+    for (; i < 41 + kLostBeforeNewMap; ++i, x -= 0.02) feed(*t, i, x);
+    ASSERT_EQ(t->open_maps().size(), 2u);
+    std::size_t candidate_at = 0, merged_at = 0;
+    for (; x > 1.0 && merged_at == 0; ++i, x -= 0.04) {
+      ASSERT_EQ(feed(*t, i, x).state, TrackingState::Ok) << i;
+      if (candidate_at == 0 && t->atlas_stats().merge_candidates == 1) candidate_at = i;
+      if (t->atlas_stats().merges == 1) merged_at = i;
+    }
+    ASSERT_NE(merged_at, 0u);
+    EXPECT_EQ(t->atlas_stats().merges_rejected, 0u);
+    EXPECT_EQ(merged_at, candidate_at + static_cast<std::size_t>(verify));
+  }
+}
+
 TEST(AtlasConfig, KeyIsReadAndRangeChecked) {
   EXPECT_EQ(TrackerConfig{}.new_map_after_lost_frames, 45);
   const TrackerConfig c =
       TrackerConfig::from_yaml(ConfigReader::from_string("new_map_after_lost_frames: 0\n", "tracking.yaml"));
   EXPECT_EQ(c.new_map_after_lost_frames, 0);
   EXPECT_EQ(TrackerConfig{}.young_map_frames, 30);
+  EXPECT_EQ(TrackerConfig{}.merge_verify_frames, 3);
+  EXPECT_EQ(TrackerConfig::from_yaml(ConfigReader::from_string("merge_verify_frames: 6\n", "t.yaml"))
+                .merge_verify_frames,
+            6);
+  EXPECT_THROW(TrackerConfig::from_yaml(ConfigReader::from_string("merge_verify_frames: -1\n", "t.yaml")),
+               ConfigError);
   EXPECT_EQ(
       TrackerConfig::from_yaml(ConfigReader::from_string("young_map_frames: 0\n", "t.yaml")).young_map_frames,
       0);

@@ -33,6 +33,7 @@ TrackerConfig TrackerConfig::from_yaml(const ConfigReader& r) {
   r.read("new_map_after_lost_frames", c.new_map_after_lost_frames, 0, 100000);
   r.read("young_map_frames", c.young_map_frames, 0, 100000);
   r.read("merge_search_interval", c.merge_search_interval, 1, 10000);
+  r.read("merge_verify_frames", c.merge_verify_frames, 0, 300);
   r.read("still_people_reserve_keyframes", c.still_people_reserve_keyframes, 0, 100);
   r.read("still_people_reserve_max_age_frames", c.still_people_reserve_max_age_frames, 1, 100000);
   r.read("still_people_retry", c.still_people_retry);

@@ -59,7 +59,7 @@ struct TrackerConfig {
   // trusted pose, a lost frame that fails to relocalise and has init_min_features depth features starts
   // a new map, seeded at the last trusted pose; while more than one map is open, tracked frames look for
   // the other maps' keyframes and merge the newer map into the older one once the pose is verified
-  // (relocalization_verify_frames further frames, the relocalisation limits). 0: never (lost stays lost).
+  // (merge_verify_frames further frames, the relocalisation limits). 0: never (lost stays lost).
   int new_map_after_lost_frames = 45;
   // A map this tracker started fewer than this many frames ago is young: when it is lost, the first
   // frame that fails to relocalise starts a new map instead of waiting new_map_after_lost_frames (a map
@@ -69,6 +69,9 @@ struct TrackerConfig {
   // While several maps are open, a trusted frame looks for the other maps only every this many frames
   // (the search holds the map lock ~10-50 ms); a candidate found is then verified on every frame. 1: always.
   int merge_search_interval = 5;
+  // A merge candidate is carried out once this many next frames found the other map again where the
+  // candidate transform puts them (within the relocalisation step limits). 0: at once.
+  int merge_verify_frames = 3;
   // The features of people proven still that the last this many keyframes were made without
   // (Frame::reserve) are kept; when a frame cannot be tracked without the people (still_people_retry),
   // they are added to their keyframes and made map points from depth (docs/dynamic.md, "A last resort

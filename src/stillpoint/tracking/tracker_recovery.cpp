@@ -266,8 +266,7 @@ void Tracker::look_for_other_maps(Frame& frame) {
         "frame {} (map {}) also located in map {} against keyframe {} ({} inliers there, {} here): "
         "verifying a merge",
         frame.index, map::to_int(current_map_), map::to_int(other), match, inliers_there, inliers_here);
-    pending_merge_ =
-        PendingMerge{other, match, S_other_cur, config_.relocalization_verify_frames, frame.index};
+    pending_merge_ = PendingMerge{other, match, S_other_cur, config_.merge_verify_frames, frame.index};
   } else {
     // The same rule as a relocalisation's check: the pose in the other map must be where this frame's
     // pose, moved by the candidate transform, puts it.
