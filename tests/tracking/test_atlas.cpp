@@ -59,6 +59,13 @@ class Atlas : public ::testing::Test {
     return t.track(f, {});
   }
 
+  // Frames 0..n-1 walk along the first place at 2 cm a frame, each expected tracked; returns n.
+  std::size_t walk_first_place(Tracker& t, std::size_t n = 40) {
+    for (std::size_t i = 0; i < n; ++i)
+      EXPECT_EQ(feed(t, i, 0.02 * static_cast<double>(i)).state, TrackingState::Ok) << i;
+    return n;
+  }
+
   static constexpr int kLostBeforeNewMap = 10;
   map::Map map_;
   TrackerConfig config_;
@@ -70,8 +77,7 @@ class Atlas : public ::testing::Test {
 
 TEST_F(Atlas, LostInAnUnmappedPlaceStartsANewMapThatMergesWhenTheOldMapIsSeenAgain) {
   auto t = make_tracker();
-  std::size_t i = 0;
-  for (; i < 40; ++i) ASSERT_EQ(feed(*t, i, 0.02 * static_cast<double>(i)).state, TrackingState::Ok) << i;
+  std::size_t i = walk_first_place(*t);
   ASSERT_EQ(t->atlas_stats().maps_created, 1u);
 
   // Carried to x = 9 m: nothing of the first map in view, so relocalisation fails on every frame.
@@ -159,8 +165,7 @@ TEST_F(Atlas, LostInAnUnmappedPlaceStartsANewMapThatMergesWhenTheOldMapIsSeenAga
 TEST_F(Atlas, ZeroKeepsTheOldBehaviourLostStaysLost) {
   config_.new_map_after_lost_frames = 0;
   auto t = make_tracker();
-  std::size_t i = 0;
-  for (; i < 40; ++i) ASSERT_EQ(feed(*t, i, 0.02 * static_cast<double>(i)).state, TrackingState::Ok) << i;
+  std::size_t i = walk_first_place(*t);
   double x = 9.0;
   for (; i < 100; ++i, x -= 0.02) EXPECT_EQ(feed(*t, i, x).state, TrackingState::Lost) << i;
   EXPECT_EQ(t->atlas_stats().maps_created, 1u);
@@ -170,8 +175,7 @@ TEST_F(Atlas, ZeroKeepsTheOldBehaviourLostStaysLost) {
 
 TEST_F(Atlas, NoNewMapFromAFrameWithTooFewDepthFeatures) {
   auto t = make_tracker();
-  std::size_t i = 0;
-  for (; i < 40; ++i) ASSERT_EQ(feed(*t, i, 0.02 * static_cast<double>(i)).state, TrackingState::Ok) << i;
+  std::size_t i = walk_first_place(*t);
   // Lost twice as long as needed, but every frame keeps only 100 features (init_min_features is 200).
   for (; i < 40 + 2 * kLostBeforeNewMap; ++i) {
     Frame f = testing::synthetic_frame(world_, camera_at(9.0), i, cam_, depth_.bf);
@@ -194,8 +198,7 @@ TEST_F(Atlas, NoNewMapFromAFrameWithTooFewDepthFeatures) {
 // relocalised in the second tracks in the second (its frame), not in a map 0 that mixes both.
 TEST_F(Atlas, ASavedMapKeepsItsMapsApartWhenLoaded) {
   auto t = make_tracker();
-  std::size_t i = 0;
-  for (; i < 40; ++i) ASSERT_EQ(feed(*t, i, 0.02 * static_cast<double>(i)).state, TrackingState::Ok) << i;
+  std::size_t i = walk_first_place(*t);
   double x = 9.0;
   for (; i < 40 + kLostBeforeNewMap + 20; ++i, x -= 0.02) feed(*t, i, x);
   ASSERT_EQ(t->open_maps().size(), 2u);
@@ -232,8 +235,7 @@ TEST_F(Atlas, ASavedMapKeepsItsMapsApartWhenLoaded) {
 TEST_F(Atlas, AMapLostSoonAfterItsStartIsFollowedByANewMapOnTheFirstFrameThatFailsToRelocalise) {
   config_.young_map_frames = 30;
   auto t = make_tracker();
-  std::size_t i = 0;
-  for (; i < 4; ++i) ASSERT_EQ(feed(*t, i, 0.02 * static_cast<double>(i)).state, TrackingState::Ok) << i;
+  std::size_t i = walk_first_place(*t, 4);
   // Carried away: the first frame is lost, the next one fails to relocalise and starts map 1 at once.
   EXPECT_EQ(feed(*t, i++, 9.0).state, TrackingState::Lost);
   EXPECT_EQ(t->atlas_stats().maps_created, 1u);
@@ -248,8 +250,7 @@ TEST_F(Atlas, AMapLostSoonAfterItsStartIsFollowedByANewMapOnTheFirstFrameThatFai
 TEST_F(Atlas, AMapLostLaterThanTheYoungSpanWaitsForTheConfiguredLoss) {
   config_.young_map_frames = 30;
   auto t = make_tracker();
-  std::size_t i = 0;
-  for (; i < 40; ++i) ASSERT_EQ(feed(*t, i, 0.02 * static_cast<double>(i)).state, TrackingState::Ok) << i;
+  std::size_t i = walk_first_place(*t);
   double x = 9.0;
   for (; i < 40 + kLostBeforeNewMap; ++i, x -= 0.02)
     EXPECT_EQ(feed(*t, i, x).state, TrackingState::Lost) << i;
@@ -266,8 +267,7 @@ TEST_F(Atlas, AMergeWaitsForItsVerificationFrames) {
     config_.merge_verify_frames = verify;
     map::Map fresh;
     auto t = std::make_unique<Tracker>(fresh, config_, cam_, depth_, map::ScalePyramid::make(8, 1.2), 30.0);
-    std::size_t i = 0;
-    for (; i < 40; ++i) ASSERT_EQ(feed(*t, i, 0.02 * static_cast<double>(i)).state, TrackingState::Ok) << i;
+    std::size_t i = walk_first_place(*t);
     double x = 9.0;
     for (; i < 41 + kLostBeforeNewMap; ++i, x -= 0.02) feed(*t, i, x);
     ASSERT_EQ(t->open_maps().size(), 2u);
