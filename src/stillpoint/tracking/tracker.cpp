@@ -7,6 +7,7 @@
 #include <numbers>
 #include <numeric>
 #include <unordered_set>
+#include <utility>
 
 #include "stillpoint/tracking/projection_matcher.hpp"
 
@@ -713,7 +714,7 @@ map::KeyframeId Tracker::create_keyframe(map::MapView& view, Frame& frame, Keyfr
   reference_ = kid;
   last_keyframe_frame_ = frame.index;
   if (config_.still_people_reserve_keyframes > 0 && frame.reserve.size() > 0) {
-    reserves_.push_back({kid, frame.index, std::move(frame.reserve)});  // the frame is done with it
+    reserves_.push_back({kid, frame.index, std::exchange(frame.reserve, {})});  // the frame is done with it
     while (reserves_.size() > static_cast<std::size_t>(config_.still_people_reserve_keyframes))
       reserves_.pop_front();
   }

@@ -140,13 +140,12 @@ map::KeyframeId Tracker::locate(Frame& frame, const std::vector<map::KeyframeId>
 
 bool Tracker::new_map_due(const Frame& frame) const {
   if (config_.new_map_after_lost_frames <= 0 || !last_trusted_T_cw_ || verify_left_ > 0) return false;
-  if (lost_streak_ < static_cast<std::size_t>(config_.new_map_after_lost_frames)) {
-    // Young when the loss began (the frame after the last trusted one) within young_map_frames of the
-    // map's start.
-    if (!map_started_frame_ || frame.index - lost_streak_ >=
-                                   *map_started_frame_ + static_cast<std::size_t>(config_.young_map_frames))
-      return false;
-  }
+  // A map whose loss began (the frame after the last trusted one) within young_map_frames of its start
+  // does not wait.
+  const bool young =
+      map_started_frame_ &&
+      frame.index - lost_streak_ < *map_started_frame_ + static_cast<std::size_t>(config_.young_map_frames);
+  if (!young && lost_streak_ < static_cast<std::size_t>(config_.new_map_after_lost_frames)) return false;
   const auto with_depth =
       std::count_if(frame.features.depth.begin(), frame.features.depth.end(), [](float d) { return d > 0; });
   return with_depth >= config_.init_min_features;
