@@ -99,6 +99,7 @@ TEST_F(Relocalization, FindsAPoseFarFromWhereItWasLostAndVerifiesIt) {
   EXPECT_FALSE(verified.verifying);
   EXPECT_EQ(t->relocalizations(), 1u);
   EXPECT_EQ(t->relocalization_stats().accepted, 1u);
+  EXPECT_EQ(t->relocalization_stats().ambiguous, 0u);  // every candidate that located it agreed
   EXPECT_EQ(t->relocalization_stats().rejected_by_consistency, 0u);
   EXPECT_EQ(t->first_relocalization_frame(), std::optional<std::size_t>(41));
   // The verified frames are written after all, at their true places; only the blank frame is lost.
@@ -149,6 +150,7 @@ TEST_F(Relocalization, ProviderCandidatesAreTriedFirst) {
   // near the kidnap target, as the BoW database does in a run.
   config_.relocalization_candidates = 1;
   config_.relocalization_verify_frames = 0;
+  config_.reloc_agreeing_candidates = 0;  // no other candidate asked to agree
   auto t = make_tracker();
   std::vector<map::KeyframeId> asked;
   t->set_relocalization_candidates([&asked](const map::MapReader& view, const Frame&) {
@@ -171,9 +173,18 @@ TEST(RelocalizationConfig, KeysAreReadAndRangeChecked) {
       "relocalization_verify_frames: 5\nrelocalization_max_step_m: 0.1\nrelocalization_max_step_deg: 8\n",
       "tracking.yaml"));
   EXPECT_EQ(c.relocalization_verify_frames, 5);
+  EXPECT_TRUE(c.reloc_pnp_inliers_only);  // the default
+  EXPECT_EQ(c.reloc_agreeing_candidates, 2);
   EXPECT_DOUBLE_EQ(c.relocalization_max_step_m, 0.1);
   EXPECT_DOUBLE_EQ(c.relocalization_max_step_deg, 8.0);
   EXPECT_THROW(TrackerConfig::from_yaml(ConfigReader::from_string("relocalization_verify_frames: -1\n", "t")),
+               ConfigError);
+  const TrackerConfig d = TrackerConfig::from_yaml(ConfigReader::from_string(
+      "reloc_pnp_inliers_only: false\nreloc_agreeing_candidates: 0\nmerge_agreeing_candidates: 4\n", "t"));
+  EXPECT_FALSE(d.reloc_pnp_inliers_only);
+  EXPECT_EQ(d.reloc_agreeing_candidates, 0);
+  EXPECT_EQ(d.merge_agreeing_candidates, 4);
+  EXPECT_THROW(TrackerConfig::from_yaml(ConfigReader::from_string("reloc_agreeing_candidates: -1\n", "t")),
                ConfigError);
   EXPECT_THROW(TrackerConfig::from_yaml(ConfigReader::from_string("relocalization_max_step_m: 0\n", "t")),
                ConfigError);

@@ -463,6 +463,7 @@ nlohmann::json SlamSystem::statistics() {
                             {"poses_found", r.poses_found},
                             {"accepted", r.accepted},
                             {"rejected_by_consistency", r.rejected_by_consistency},
+                            {"ambiguous", r.ambiguous},
                             {"verify_frames", config_.tracker.relocalization_verify_frames},
                             {"database", reloc_index_ ? "bow" : "recent-keyframes"}};
     if (reloc_index_) {

@@ -26,6 +26,9 @@ TrackerConfig TrackerConfig::from_yaml(const ConfigReader& r) {
   r.read("init_all_depth_points", c.init_all_depth_points);
   r.read("keyframe_all_depth_points", c.keyframe_all_depth_points);
   r.read("relocalization_candidates", c.relocalization_candidates, std::size_t{1}, std::size_t{1000});
+  r.read("reloc_pnp_inliers_only", c.reloc_pnp_inliers_only);
+  r.read("reloc_agreeing_candidates", c.reloc_agreeing_candidates, 0, 100);
+  r.read("merge_agreeing_candidates", c.merge_agreeing_candidates, 0, 100);
   r.read("relocalization_verify_frames", c.relocalization_verify_frames, 0, 300);
   r.read("relocalization_max_step_m", c.relocalization_max_step_m, 0.001, 10.0);
   r.read("relocalization_max_step_deg", c.relocalization_max_step_deg, 0.01, 180.0);

@@ -44,6 +44,16 @@ struct TrackerConfig {
   // ones only up to new_points_min).
   bool keyframe_all_depth_points = false;
   std::size_t relocalization_candidates = 20;
+  // A candidate keyframe's PnP RANSAC pose is refined from its inliers only, as ORB-SLAM does (false:
+  // every BoW match enters the first solve; outliers, often half the matches, drag the pose off).
+  bool reloc_pnp_inliers_only = true;
+  // A pose found is accepted only once this many further candidate keyframes that also locate the
+  // frame put it within the relocalisation step limits of it (fewer are enough when the candidates run
+  // out); one that puts it elsewhere makes the frame ambiguous and it stays lost. 0: the first pose
+  // found is taken.
+  int reloc_agreeing_candidates = 2;
+  // The same for a merge's candidate (its transform is verified over merge_verify_frames anyway).
+  int merge_agreeing_candidates = 2;
   // A relocalised pose is trusted (written, allowed to make keyframes) only once this many following
   // frames tracked from it: each with min_inliers_after_reloc local-map inliers and a pose within the
   // step limits of the constant-velocity prediction (zero motion for the first). 0: trusted at once.
@@ -117,6 +127,7 @@ struct RelocalizationStats {
   std::size_t poses_found = 0;              // poses with enough inliers after projection refinement
   std::size_t accepted = 0;                 // ... that passed the consistency check over the next frames
   std::size_t rejected_by_consistency = 0;  // ... that did not (back to lost)
+  std::size_t ambiguous = 0;                // frames two candidate keyframes put in different places
 };
 
 // New maps started after long losses and merges of maps (the Atlas), counted per run.
@@ -201,11 +212,12 @@ class Tracker {
   bool track_reference_keyframe(Frame& frame);
   bool relocalize(Frame& frame);
   // Relocalisation's search: the first candidate keyframe that gives the frame a pose with
-  // min_inliers_after_reloc local-map inliers (frame.T_cw, matches and the local map set), or kNoKeyframe.
+  // min_inliers_after_reloc local-map inliers (frame.T_cw and matches set), once `agreeing_candidates`
+  // further ones that give a pose agree with it (PoseAgreement), or kNoKeyframe (none, or ambiguous).
   // Copies what it reads under short reads (a candidate's keyframe, then its local map) and matches and
   // solves on the copies without the lock.
   map::KeyframeId locate(Frame& frame, const std::vector<map::KeyframeId>& candidates,
-                         PointCounterUpdates& counters);
+                         PointCounterUpdates& counters, int agreeing_candidates);
   // Atlas: a lost frame starts a new map when lost long enough (TrackerConfig::new_map_after_lost_frames).
   [[nodiscard]] bool new_map_due(const Frame& frame) const;
   void start_new_map(Frame& frame, TrackOutcome& out);

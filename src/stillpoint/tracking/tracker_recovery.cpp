@@ -7,6 +7,7 @@
 #include <opencv2/calib3d.hpp>
 #include <unordered_set>
 
+#include "stillpoint/tracking/pose_agreement.hpp"
 #include "stillpoint/tracking/projection_matcher.hpp"
 #include "stillpoint/tracking/tracker.hpp"
 
@@ -54,7 +55,7 @@ bool Tracker::relocalize(Frame& frame) {
       candidates = std::move(first);
     }
   }
-  const map::KeyframeId kid = locate(frame, candidates, counters_);
+  const map::KeyframeId kid = locate(frame, candidates, counters_, config_.reloc_agreeing_candidates);
   if (kid == map::kNoKeyframe) return false;
   reference_ = kid;
   last_reloc_frame_ = frame.index;
@@ -78,7 +79,18 @@ bool Tracker::relocalize(Frame& frame) {
 }
 
 map::KeyframeId Tracker::locate(Frame& frame, const std::vector<map::KeyframeId>& candidates,
-                                PointCounterUpdates& counters) {
+                                PointCounterUpdates& counters, int agreeing_candidates) {
+  // The first pose found, kept while further candidates are asked whether they agree with it.
+  struct Found {
+    map::KeyframeId keyframe;
+    geo::SE3 T_cw;
+    std::vector<map::PointId> points;
+    std::vector<bool> outlier;
+    PointCounterUpdates counters;
+  };
+  std::optional<Found> first;
+  PoseAgreement agreement(agreeing_candidates, config_.relocalization_max_step_m,
+                          config_.relocalization_max_step_deg);
   for (map::KeyframeId kid : candidates) {
     std::optional<LocalMapSnapshot::Keyframe> kf;
     {
@@ -118,6 +130,14 @@ map::KeyframeId Tracker::locate(Frame& frame, const std::vector<map::KeyframeId>
     }
     frame.T_cw = geo::SE3(Eigen::Quaterniond(Re).normalized(), te);
     frame.has_pose = true;
+    if (config_.reloc_pnp_inliers_only) {
+      // Only RANSAC's inliers enter the first solve (as ORB-SLAM): from a pose fitted to a minority of
+      // the matches, the others' pull drags it off and the solve rejects nearly every match.
+      std::vector<bool> inlier(object.size(), false);
+      for (int k : inliers) inlier[static_cast<std::size_t>(k)] = true;
+      for (std::size_t k = 0; k < object.size(); ++k)
+        if (!inlier[k]) frame.points[feature_of[k]] = map::kNoPoint;
+    }
     if (optimize_pose(frame) < 10) continue;
     // Recover more matches by projection before accepting.
     {
@@ -132,7 +152,26 @@ map::KeyframeId Tracker::locate(Frame& frame, const std::vector<map::KeyframeId>
     snapshot_.index_copies();
     match_local_points(snapshot_, frame, local_points_, 2.0 * config_.local_search_factor,
                        MatchContext{camera_, pyramid_, depth_.bf}, counters);
-    if (optimize_pose(frame) >= config_.min_inliers_after_reloc) return kid;
+    if (optimize_pose(frame) < config_.min_inliers_after_reloc) continue;
+    if (!first) first = Found{kid, frame.T_cw, frame.points, frame.outlier, counters};
+    const PoseAgreement::Verdict verdict = agreement.add(frame.T_cw);
+    if (verdict == PoseAgreement::Verdict::Ambiguous) {
+      ++reloc_stats_.ambiguous;
+      spdlog::debug("frame {}: keyframes {} and {} locate it {:.1f} cm / {:.1f} deg apart: ambiguous",
+                    frame.index, first->keyframe, kid, 100.0 * agreement.conflict().translation_m,
+                    agreement.conflict().rotation_deg);
+      first.reset();
+      break;
+    }
+    if (verdict == PoseAgreement::Verdict::Agreed) break;
+  }
+  if (first) {
+    frame.T_cw = first->T_cw;
+    frame.points = std::move(first->points);
+    frame.outlier = std::move(first->outlier);
+    counters = std::move(first->counters);
+    frame.has_pose = true;
+    return first->keyframe;
   }
   frame.has_pose = false;
   return map::kNoKeyframe;
@@ -235,7 +274,7 @@ void Tracker::look_for_other_maps(Frame& frame) {
   const bool slots_fresh = local_slots_fresh_;
   refined_.assign(probe.features.size(), false);
   PointCounterUpdates ignored;  // the other map's points were not seen by a tracked frame of theirs
-  const map::KeyframeId match = locate(probe, candidates, ignored);
+  const map::KeyframeId match = locate(probe, candidates, ignored, config_.merge_agreeing_candidates);
   reference_ = reference;
   local_keyframes_ = local_keyframes;
   local_points_ = local_points;
