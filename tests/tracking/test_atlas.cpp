@@ -259,6 +259,41 @@ TEST_F(Atlas, AMapLostLaterThanTheYoungSpanWaitsForTheConfiguredLoss) {
   EXPECT_EQ(t->atlas_stats().maps_created, 2u);
 }
 
+// tracking.drop_abandoned_young_maps: map 1, lost 6 frames after its start and left by relocalising in
+// map 0, is taken back (its frames leave the trajectory and count as lost); switched off, they stay.
+TEST_F(Atlas, AYoungMapLeftForAnOlderMapIsTakenBackWhenSwitchedOn) {
+  for (const bool drop : {true, false}) {
+    SCOPED_TRACE(drop);
+    config_.young_map_frames = 30;
+    config_.drop_abandoned_young_maps = drop;
+    map::Map fresh;
+    auto t = std::make_unique<Tracker>(fresh, config_, cam_, depth_, map::ScalePyramid::make(8, 1.2), 30.0);
+    std::size_t i = walk_first_place(*t);
+    double x = 9.0;
+    for (; i < 40 + kLostBeforeNewMap; ++i, x -= 0.02) feed(*t, i, x);  // carried away: lost
+    const std::size_t map1_start = i;
+    for (; i < map1_start + 6; ++i, x -= 0.02) ASSERT_EQ(feed(*t, i, x).state, TrackingState::Ok) << i;
+    ASSERT_EQ(t->current_map(), map::MapId{1});
+    const std::size_t lost_before = t->lost_frames();
+    Frame blank;  // the lens covered: map 1 is lost young
+    blank.index = i++;
+    blank.stamp = static_cast<double>(blank.index) / 30.0;
+    blank.features.descriptors = cv::Mat(0, 32, CV_8U);
+    ASSERT_EQ(t->track(blank, {}).state, TrackingState::Lost);
+    // Carried back to the first place: relocalised in map 0 and verified.
+    for (x = 0.40; x < 0.50; ++i, x += 0.02) feed(*t, i, x);
+    ASSERT_EQ(t->current_map(), map::MapId{0});
+    ASSERT_EQ(t->relocalizations(), 1u);
+    std::size_t map1_frames_written = 0;
+    for (const TrajectoryEntry& e : t->trajectory().entries())
+      map1_frames_written += e.frame_index >= map1_start && e.frame_index < map1_start + 6 ? 1 : 0;
+    EXPECT_EQ(map1_frames_written, drop ? 0u : 6u);
+    EXPECT_EQ(t->atlas_stats().young_maps_dropped, drop ? 1u : 0u);
+    EXPECT_EQ(t->atlas_stats().frames_withdrawn, drop ? 6u : 0u);
+    EXPECT_EQ(t->lost_frames(), lost_before + 1 + (drop ? 6u : 0u));  // the blank frame, and map 1's
+  }
+}
+
 // tracking.merge_verify_frames: a candidate found at frame c is merged at frame c + merge_verify_frames,
 // each frame between having found the other map where the candidate transform puts it.
 TEST_F(Atlas, AMergeWaitsForItsVerificationFrames) {
@@ -284,7 +319,8 @@ TEST_F(Atlas, AMergeWaitsForItsVerificationFrames) {
 }
 
 TEST(AtlasConfig, KeyIsReadAndRangeChecked) {
-  EXPECT_EQ(TrackerConfig{}.new_map_after_lost_frames, 45);
+  EXPECT_EQ(TrackerConfig{}.new_map_after_lost_frames, 15);
+  EXPECT_TRUE(TrackerConfig{}.drop_abandoned_young_maps);
   const TrackerConfig c =
       TrackerConfig::from_yaml(ConfigReader::from_string("new_map_after_lost_frames: 0\n", "tracking.yaml"));
   EXPECT_EQ(c.new_map_after_lost_frames, 0);
@@ -300,6 +336,9 @@ TEST(AtlasConfig, KeyIsReadAndRangeChecked) {
       0);
   EXPECT_THROW(TrackerConfig::from_yaml(ConfigReader::from_string("young_map_frames: -1\n", "t.yaml")),
                ConfigError);
+  EXPECT_TRUE(
+      TrackerConfig::from_yaml(ConfigReader::from_string("drop_abandoned_young_maps: true\n", "t.yaml"))
+          .drop_abandoned_young_maps);
   EXPECT_THROW(
       TrackerConfig::from_yaml(ConfigReader::from_string("new_map_after_lost_frames: -1\n", "t.yaml")),
       ConfigError);

@@ -526,6 +526,8 @@ nlohmann::json SlamSystem::statistics() {
     j["merge_searches"] = a.merge_searches;
     j["merge_candidates"] = a.merge_candidates;
     j["merges_rejected"] = a.merges_rejected;
+    j["young_maps_dropped"] = a.young_maps_dropped;
+    j["frames_withdrawn"] = a.frames_withdrawn;
     std::map<std::uint32_t, std::size_t> per_map;
     for (const auto& p : tracker_.trajectory().resolve(view)) ++per_map[map::to_int(p.map_id)];
     nlohmann::json frames = nlohmann::json::object();

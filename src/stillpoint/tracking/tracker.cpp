@@ -36,6 +36,7 @@ TrackerConfig TrackerConfig::from_yaml(const ConfigReader& r) {
   r.read("motion_break_deg", c.motion_break_deg, 0.01, 180.0);
   r.read("new_map_after_lost_frames", c.new_map_after_lost_frames, 0, 100000);
   r.read("young_map_frames", c.young_map_frames, 0, 100000);
+  r.read("drop_abandoned_young_maps", c.drop_abandoned_young_maps);
   r.read("merge_search_interval", c.merge_search_interval, 1, 10000);
   r.read("merge_verify_frames", c.merge_verify_frames, 0, 300);
   r.read("still_people_reserve_keyframes", c.still_people_reserve_keyframes, 0, 100);

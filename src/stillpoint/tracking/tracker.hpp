@@ -70,12 +70,16 @@ struct TrackerConfig {
   // a new map, seeded at the last trusted pose; while more than one map is open, tracked frames look for
   // the other maps' keyframes and merge the newer map into the older one once the pose is verified
   // (merge_verify_frames further frames, the relocalisation limits). 0: never (lost stays lost).
-  int new_map_after_lost_frames = 45;
+  int new_map_after_lost_frames = 15;
   // A map this tracker started fewer than this many frames ago is young: when it is lost, the first
   // frame that fails to relocalise starts a new map instead of waiting new_map_after_lost_frames (a map
   // lost within a second of its start was begun in a view it cannot hold; ORB-SLAM3 drops a lost map
   // of < 10 keyframes). 0: never (every map waits).
   int young_map_frames = 30;
+  // A young map (above) that tracking leaves by relocalising into another map, never merged, is taken
+  // back: its frames leave the trajectory and count as lost. A map begun in a view it could not hold
+  // (a close object filling it) gave those poses from that object (ORB-SLAM3 drops such a map whole).
+  bool drop_abandoned_young_maps = true;
   // While several maps are open, a trusted frame looks for the other maps only every this many frames
   // (the search holds the map lock ~10-50 ms); a candidate found is then verified on every frame. 1: always.
   int merge_search_interval = 5;
@@ -132,11 +136,13 @@ struct RelocalizationStats {
 
 // New maps started after long losses and merges of maps (the Atlas), counted per run.
 struct AtlasStats {
-  std::size_t maps_created = 0;      // the first map included (0 when a loaded map is the first)
-  std::size_t merge_searches = 0;    // frames that searched the other maps for a new candidate
-  std::size_t merge_candidates = 0;  // another map's keyframe gave a pose (verification started)
-  std::size_t merges = 0;            // ... verified and merged
-  std::size_t merges_rejected = 0;   // ... whose next frames did not agree (or were lost)
+  std::size_t maps_created = 0;        // the first map included (0 when a loaded map is the first)
+  std::size_t merge_searches = 0;      // frames that searched the other maps for a new candidate
+  std::size_t merge_candidates = 0;    // another map's keyframe gave a pose (verification started)
+  std::size_t merges = 0;              // ... verified and merged
+  std::size_t merges_rejected = 0;     // ... whose next frames did not agree (or were lost)
+  std::size_t young_maps_dropped = 0;  // young maps left for another map (drop_abandoned_young_maps)
+  std::size_t frames_withdrawn = 0;    // ... their frames, taken out of the trajectory
 };
 
 // Relocalisation candidates from anywhere in the map (a BoW keyframe database, a whole-image score),
@@ -220,6 +226,8 @@ class Tracker {
                          PointCounterUpdates& counters, int agreeing_candidates);
   // Atlas: a lost frame starts a new map when lost long enough (TrackerConfig::new_map_after_lost_frames).
   [[nodiscard]] bool new_map_due(const Frame& frame) const;
+  // The map tracking is in was started by this tracker and lost within young_map_frames of its start.
+  [[nodiscard]] bool lost_young(const Frame& frame) const;
   void start_new_map(Frame& frame, TrackOutcome& out);
   // Atlas: a trusted frame of one of several open maps looks for the other maps' keyframes; a pose there
   // verified over the next frames merges the newer map into the older one.

@@ -70,6 +70,14 @@ bool Tracker::relocalize(Frame& frame) {
   if (found_in != current_map_) {
     spdlog::info("frame {} relocalised in map {} (was tracking in map {})", frame.index,
                  map::to_int(found_in), map::to_int(current_map_));
+    if (config_.drop_abandoned_young_maps && lost_young(frame)) {
+      const std::size_t withdrawn = trajectory_.withdraw_from(*map_started_frame_);
+      lost_frames_ += withdrawn;
+      ++atlas_stats_.young_maps_dropped;
+      atlas_stats_.frames_withdrawn += withdrawn;
+      spdlog::info("map {} (from frame {}) left young: its {} frames taken back", map::to_int(current_map_),
+                   *map_started_frame_, withdrawn);
+    }
     map_started_frame_.reset();  // an older map: not young
   }
   current_map_ = found_in;
@@ -160,12 +168,11 @@ map::KeyframeId Tracker::locate(Frame& frame, const std::vector<map::KeyframeId>
       spdlog::debug("frame {}: keyframes {} and {} locate it {:.1f} cm / {:.1f} deg apart: ambiguous",
                     frame.index, first->keyframe, kid, 100.0 * agreement.conflict().translation_m,
                     agreement.conflict().rotation_deg);
-      first.reset();
       break;
     }
     if (verdict == PoseAgreement::Verdict::Agreed) break;
   }
-  if (first) {
+  if (first && agreement.finish() == PoseAgreement::Verdict::Agreed) {
     frame.T_cw = first->T_cw;
     frame.points = std::move(first->points);
     frame.outlier = std::move(first->outlier);
@@ -177,13 +184,16 @@ map::KeyframeId Tracker::locate(Frame& frame, const std::vector<map::KeyframeId>
   return map::kNoKeyframe;
 }
 
+bool Tracker::lost_young(const Frame& frame) const {
+  // The loss began the frame after the last trusted one.
+  return map_started_frame_ && frame.index - lost_streak_ <
+                                   *map_started_frame_ + static_cast<std::size_t>(config_.young_map_frames);
+}
+
 bool Tracker::new_map_due(const Frame& frame) const {
   if (config_.new_map_after_lost_frames <= 0 || !last_trusted_T_cw_ || verify_left_ > 0) return false;
-  // A map whose loss began (the frame after the last trusted one) within young_map_frames of its start
-  // does not wait.
-  const bool young =
-      map_started_frame_ &&
-      frame.index - lost_streak_ < *map_started_frame_ + static_cast<std::size_t>(config_.young_map_frames);
+  // A map lost young does not wait.
+  const bool young = lost_young(frame);
   if (!young && lost_streak_ < static_cast<std::size_t>(config_.new_map_after_lost_frames)) return false;
   const auto with_depth =
       std::count_if(frame.features.depth.begin(), frame.features.depth.end(), [](float d) { return d > 0; });

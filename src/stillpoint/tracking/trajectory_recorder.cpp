@@ -1,6 +1,14 @@
 #include "stillpoint/tracking/trajectory_recorder.hpp"
 
+#include <algorithm>
+
 namespace sp::track {
+
+std::size_t TrajectoryRecorder::withdraw_from(std::size_t first_frame) {
+  const std::size_t before = entries_.size();
+  std::erase_if(entries_, [first_frame](const TrajectoryEntry& e) { return e.frame_index >= first_frame; });
+  return before - entries_.size();
+}
 
 std::vector<ResolvedPose> TrajectoryRecorder::resolve(map::MapView& view) const {
   std::vector<ResolvedPose> out;

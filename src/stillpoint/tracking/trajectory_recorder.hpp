@@ -26,6 +26,8 @@ struct ResolvedPose {
 class TrajectoryRecorder {
  public:
   void record(const TrajectoryEntry& e) { entries_.push_back(e); }
+  // Takes back the frames from `first_frame` on (index order); returns how many.
+  std::size_t withdraw_from(std::size_t first_frame);
   [[nodiscard]] std::size_t size() const { return entries_.size(); }
   [[nodiscard]] const std::vector<TrajectoryEntry>& entries() const { return entries_; }
   // World poses of all recorded frames with the map as it is now (culled keyframes are followed
