@@ -40,7 +40,8 @@ tune_seeds="101 102 103 104 105 106 107 108"
 # scripts/scout_rooms.py found crowded (people cover >= 0.2), to judge the weak-keyframe hold ("Session 39").
 # Sessions 40-42 rendered only the crowded sequences of later seeds the same way, with --heldout-seeds N
 # --motions M: 402, 405, 473, 485, 486, 530 (session 40), 678, 687, 707, 744, 761 (session 41), 806 and 880
-# (session 42, scouted over seeds 801-893); docs/results.md names each sequence.
+# (session 42, scouted over seeds 801-893), 903 and 923 (session 43, seeds 894-960); docs/results.md names
+# each sequence.
 heldout_seeds="201 202 203 204 205 206 207 208 209 210 211 212 213 214 215 216 217 218 219 220 221 222 223 224 225 226 227 228 229 230 231 232 233 234 235 236 237 238 239 240 241 242 243 244 245 246 247 248 249 250 251 252 253 254 255 256 257 258 259 260 261 262 263 264 265 266 267 268 269 270 271 272 273 274 275 276 277 278 279 280 281 282 283 284 285 286 287 288 289 290 291 292 293 294 295 296 297 298 299 300 301 302 303 304 305 306 307 308 318 325 345 367 390"
 while (($#)); do
   case "$1" in
