@@ -38,7 +38,7 @@ tune_seeds="101 102 103 104 105 106 107 108"
 # rooms where local BA carries a keyframe > 3 cm, to judge two local-BA guards ("Session 38").
 # 318, 325, 345, 367, 390 in session 39, only their walking_xyz / _rpy / _halfsphere sequences that
 # scripts/scout_rooms.py found crowded (people cover >= 0.2), to judge the weak-keyframe hold ("Session 39").
-# Sessions 40-42 rendered only the crowded sequences of later seeds the same way, with --heldout-seeds N
+# Sessions 40-43 rendered only the crowded sequences of later seeds the same way, with --heldout-seeds N
 # --motions M: 402, 405, 473, 485, 486, 530 (session 40), 678, 687, 707, 744, 761 (session 41), 806 and 880
 # (session 42, scouted over seeds 801-893), 903 and 923 (session 43, seeds 894-960); docs/results.md names
 # each sequence.
