@@ -24,7 +24,6 @@ class PoseAgreement {
   Verdict add(const geo::SE3& T_cw);
   // The candidates ran out: a first pose that no candidate contradicted is taken.
   [[nodiscard]] Verdict finish() const;
-  [[nodiscard]] Verdict verdict() const { return verdict_; }
   // How far the contradicting pose lay from the first (when Ambiguous).
   [[nodiscard]] const PoseDeviation& conflict() const { return conflict_; }
 
