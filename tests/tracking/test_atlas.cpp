@@ -259,6 +259,49 @@ TEST_F(Atlas, AMapLostLaterThanTheYoungSpanWaitsForTheConfiguredLoss) {
   EXPECT_EQ(t->atlas_stats().maps_created, 2u);
 }
 
+// tracking.merge_verify_misses: a check frame that finds nothing in the other map (its view of the first
+// place hidden) does not reject the candidate when a miss is allowed; the merge then comes one frame
+// later. Without misses allowed the candidate is rejected there.
+TEST_F(Atlas, AMergeCheckThatFindsNothingIsAMissNotARejection) {
+  World wall_only;  // the second place alone: no point of map 0 in its frames
+  wall_only.points.assign(world_.points.begin() + 1500, world_.points.end());
+  wall_only.descriptors = world_.descriptors.rowRange(1500, world_.descriptors.rows).clone();
+  for (const int misses : {0, 1}) {
+    SCOPED_TRACE(misses);
+    config_.merge_verify_frames = 3;
+    config_.merge_verify_misses = misses;
+    map::Map fresh;
+    auto t = std::make_unique<Tracker>(fresh, config_, cam_, depth_, map::ScalePyramid::make(8, 1.2), 30.0);
+    std::size_t i = walk_first_place(*t);
+    double x = 9.0;
+    for (; i < 41 + kLostBeforeNewMap; ++i, x -= 0.02) feed(*t, i, x);
+    ASSERT_EQ(t->open_maps().size(), 2u);
+    std::size_t candidate_at = 0;
+    for (; x > 1.0 && candidate_at == 0; ++i, x -= 0.04) {
+      ASSERT_EQ(feed(*t, i, x).state, TrackingState::Ok) << i;
+      if (t->atlas_stats().merge_candidates == 1) candidate_at = i;
+    }
+    ASSERT_NE(candidate_at, 0u);
+    Frame hidden = testing::synthetic_frame(wall_only, camera_at(x), i, cam_, depth_.bf);
+    ASSERT_EQ(t->track(hidden, {}).state, TrackingState::Ok);
+    ++i;
+    x -= 0.04;
+    std::size_t merged_at = 0;
+    for (; x > 1.0 && merged_at == 0; ++i, x -= 0.04) {
+      ASSERT_EQ(feed(*t, i, x).state, TrackingState::Ok) << i;
+      if (t->atlas_stats().merges == 1) merged_at = i;
+    }
+    ASSERT_NE(merged_at, 0u);
+    if (misses == 1) {
+      EXPECT_EQ(t->atlas_stats().merges_rejected, 0u);
+      EXPECT_EQ(merged_at, candidate_at + 4);  // 3 frames that found it, 1 that missed
+    } else {
+      EXPECT_EQ(t->atlas_stats().merges_rejected, 1u);  // the hidden frame
+      EXPECT_GT(merged_at, candidate_at + 4);
+    }
+  }
+}
+
 // tracking.drop_abandoned_young_maps: map 1, lost 6 frames after its start and left by relocalising in
 // map 0, is taken back (its frames leave the trajectory and count as lost); switched off, they stay.
 TEST_F(Atlas, AYoungMapLeftForAnOlderMapIsTakenBackWhenSwitchedOn) {
@@ -326,6 +369,7 @@ TEST(AtlasConfig, KeyIsReadAndRangeChecked) {
   EXPECT_EQ(c.new_map_after_lost_frames, 0);
   EXPECT_EQ(TrackerConfig{}.young_map_frames, 30);
   EXPECT_EQ(TrackerConfig{}.merge_verify_frames, 3);
+  EXPECT_EQ(TrackerConfig{}.merge_verify_misses, 3);
   EXPECT_EQ(TrackerConfig::from_yaml(ConfigReader::from_string("merge_verify_frames: 6\n", "t.yaml"))
                 .merge_verify_frames,
             6);
@@ -339,6 +383,11 @@ TEST(AtlasConfig, KeyIsReadAndRangeChecked) {
   EXPECT_TRUE(
       TrackerConfig::from_yaml(ConfigReader::from_string("drop_abandoned_young_maps: true\n", "t.yaml"))
           .drop_abandoned_young_maps);
+  EXPECT_EQ(TrackerConfig::from_yaml(ConfigReader::from_string("merge_verify_misses: 2\n", "t.yaml"))
+                .merge_verify_misses,
+            2);
+  EXPECT_THROW(TrackerConfig::from_yaml(ConfigReader::from_string("merge_verify_misses: -1\n", "t.yaml")),
+               ConfigError);
   EXPECT_THROW(
       TrackerConfig::from_yaml(ConfigReader::from_string("new_map_after_lost_frames: -1\n", "t.yaml")),
       ConfigError);

@@ -39,6 +39,7 @@ TrackerConfig TrackerConfig::from_yaml(const ConfigReader& r) {
   r.read("drop_abandoned_young_maps", c.drop_abandoned_young_maps);
   r.read("merge_search_interval", c.merge_search_interval, 1, 10000);
   r.read("merge_verify_frames", c.merge_verify_frames, 0, 300);
+  r.read("merge_verify_misses", c.merge_verify_misses, 0, 300);
   r.read("still_people_reserve_keyframes", c.still_people_reserve_keyframes, 0, 100);
   r.read("still_people_reserve_max_age_frames", c.still_people_reserve_max_age_frames, 1, 100000);
   r.read("still_people_retry", c.still_people_retry);

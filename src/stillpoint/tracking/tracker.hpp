@@ -86,6 +86,9 @@ struct TrackerConfig {
   // A merge candidate is carried out once this many next frames found the other map again where the
   // candidate transform puts them (within the relocalisation step limits). 0: at once.
   int merge_verify_frames = 3;
+  // ... of which this many may find nothing in the other map without rejecting the candidate: a frame
+  // that finds no pose there says nothing against the transform, only one found elsewhere does.
+  int merge_verify_misses = 3;
   // The features of people proven still that the last this many keyframes were made without
   // (Frame::reserve) are kept; when a frame cannot be tracked without the people (still_people_retry),
   // they are added to their keyframes and made map points from depth (docs/dynamic.md, "A last resort
@@ -323,6 +326,7 @@ class Tracker {
     geo::SE3 S_other_cur;  // p_other = S * p_current
     int left = 0;          // frames still to agree
     std::size_t last_frame = 0;
+    int misses = 0;  // frames since the candidate that did not find the other map at all
   };
   std::optional<PendingMerge> pending_merge_;
   std::optional<std::size_t> last_merge_search_frame_;

@@ -291,6 +291,14 @@ void Tracker::look_for_other_maps(Frame& frame) {
   local_slots_ = local_slots;
   local_slots_fresh_ = slots_fresh;
   if (match == map::kNoKeyframe) {
+    if (pending_merge_ && frame.index == pending_merge_->last_frame + 1 &&
+        pending_merge_->misses < config_.merge_verify_misses) {
+      ++pending_merge_->misses;
+      pending_merge_->last_frame = frame.index;  // the next frame still continues the check
+      spdlog::debug("map merge check at frame {}: map {} not found ({} of {} misses)", frame.index,
+                    map::to_int(pending_merge_->other), pending_merge_->misses, config_.merge_verify_misses);
+      return;
+    }
     if (pending_merge_) {
       ++atlas_stats_.merges_rejected;
       spdlog::info("map merge candidate rejected: frame {} not found in map {} again", frame.index,
