@@ -65,6 +65,20 @@ class Atlas : public ::testing::Test {
       EXPECT_EQ(feed(t, i, 0.02 * static_cast<double>(i)).state, TrackingState::Ok) << i;
     return n;
   }
+  // A tracker on a map of its own (tests that run several configurations) that walked the first place
+  // and was carried to x = 9 m, walking back 2 cm a frame, up to frame `until`: the next frame index
+  // and position.
+  struct Carried {
+    std::unique_ptr<Tracker> tracker;
+    std::size_t next = 0;
+    double x = 0;
+  };
+  Carried carried_away(map::Map& map, std::size_t until) {
+    Carried c{std::make_unique<Tracker>(map, config_, cam_, depth_, map::ScalePyramid::make(8, 1.2), 30.0)};
+    c.next = walk_first_place(*c.tracker);
+    for (c.x = 9.0; c.next < until; ++c.next, c.x -= 0.02) feed(*c.tracker, c.next, c.x);
+    return c;
+  }
 
   static constexpr int kLostBeforeNewMap = 10;
   map::Map map_;
@@ -271,10 +285,7 @@ TEST_F(Atlas, AMergeCheckThatFindsNothingIsAMissNotARejection) {
     config_.merge_verify_frames = 3;
     config_.merge_verify_misses = misses;
     map::Map fresh;
-    auto t = std::make_unique<Tracker>(fresh, config_, cam_, depth_, map::ScalePyramid::make(8, 1.2), 30.0);
-    std::size_t i = walk_first_place(*t);
-    double x = 9.0;
-    for (; i < 41 + kLostBeforeNewMap; ++i, x -= 0.02) feed(*t, i, x);
+    auto [t, i, x] = carried_away(fresh, 41 + kLostBeforeNewMap);
     ASSERT_EQ(t->open_maps().size(), 2u);
     std::size_t candidate_at = 0;
     for (; x > 1.0 && candidate_at == 0; ++i, x -= 0.04) {
@@ -310,10 +321,7 @@ TEST_F(Atlas, AYoungMapLeftForAnOlderMapIsTakenBackWhenSwitchedOn) {
     config_.young_map_frames = 30;
     config_.drop_abandoned_young_maps = drop;
     map::Map fresh;
-    auto t = std::make_unique<Tracker>(fresh, config_, cam_, depth_, map::ScalePyramid::make(8, 1.2), 30.0);
-    std::size_t i = walk_first_place(*t);
-    double x = 9.0;
-    for (; i < 40 + kLostBeforeNewMap; ++i, x -= 0.02) feed(*t, i, x);  // carried away: lost
+    auto [t, i, x] = carried_away(fresh, 40 + kLostBeforeNewMap);  // carried away: lost
     const std::size_t map1_start = i;
     for (; i < map1_start + 6; ++i, x -= 0.02) ASSERT_EQ(feed(*t, i, x).state, TrackingState::Ok) << i;
     ASSERT_EQ(t->current_map(), map::MapId{1});
@@ -344,10 +352,7 @@ TEST_F(Atlas, AMergeWaitsForItsVerificationFrames) {
     SCOPED_TRACE(verify);
     config_.merge_verify_frames = verify;
     map::Map fresh;
-    auto t = std::make_unique<Tracker>(fresh, config_, cam_, depth_, map::ScalePyramid::make(8, 1.2), 30.0);
-    std::size_t i = walk_first_place(*t);
-    double x = 9.0;
-    for (; i < 41 + kLostBeforeNewMap; ++i, x -= 0.02) feed(*t, i, x);
+    auto [t, i, x] = carried_away(fresh, 41 + kLostBeforeNewMap);
     ASSERT_EQ(t->open_maps().size(), 2u);
     std::size_t candidate_at = 0, merged_at = 0;
     for (; x > 1.0 && merged_at == 0; ++i, x -= 0.04) {
