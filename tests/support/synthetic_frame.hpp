@@ -16,4 +16,13 @@ inline track::Frame synthetic_frame(const SyntheticScene& scene, const geo::SE3&
   return f;
 }
 
+// A frame with no features at all (the lens covered), stamped like synthetic_frame.
+inline track::Frame blank_frame(std::size_t index) {
+  track::Frame f;
+  f.index = index;
+  f.stamp = static_cast<double>(index) / 30.0;
+  f.features.descriptors = cv::Mat(0, 32, CV_8U);
+  return f;
+}
+
 }  // namespace sp::testing

@@ -50,8 +50,9 @@ class Atlas : public ::testing::Test {
     add_points(world_, 1500, -2.5, 2.5, 3);   // the first place
     add_points(world_, 3000, 2.5, 12.5, 11);  // the rest of the wall: never seen before the kidnap
   }
-  std::unique_ptr<Tracker> make_tracker() {
-    return std::make_unique<Tracker>(map_, config_, cam_, depth_, map::ScalePyramid::make(8, 1.2), 30.0);
+  std::unique_ptr<Tracker> make_tracker() { return make_tracker(map_); }
+  std::unique_ptr<Tracker> make_tracker(map::Map& map) {
+    return std::make_unique<Tracker>(map, config_, cam_, depth_, map::ScalePyramid::make(8, 1.2), 30.0);
   }
   TrackOutcome feed(Tracker& t, std::size_t index, double x) {
     truth_[index] = x;
@@ -74,7 +75,7 @@ class Atlas : public ::testing::Test {
     double x = 0;
   };
   Carried carried_away(map::Map& map, std::size_t until) {
-    Carried c{std::make_unique<Tracker>(map, config_, cam_, depth_, map::ScalePyramid::make(8, 1.2), 30.0)};
+    Carried c{make_tracker(map)};
     c.next = walk_first_place(*c.tracker);
     for (c.x = 9.0; c.next < until; ++c.next, c.x -= 0.02) feed(*c.tracker, c.next, c.x);
     return c;
@@ -326,10 +327,7 @@ TEST_F(Atlas, AYoungMapLeftForAnOlderMapIsTakenBackWhenSwitchedOn) {
     for (; i < map1_start + 6; ++i, x -= 0.02) ASSERT_EQ(feed(*t, i, x).state, TrackingState::Ok) << i;
     ASSERT_EQ(t->current_map(), map::MapId{1});
     const std::size_t lost_before = t->lost_frames();
-    Frame blank;  // the lens covered: map 1 is lost young
-    blank.index = i++;
-    blank.stamp = static_cast<double>(blank.index) / 30.0;
-    blank.features.descriptors = cv::Mat(0, 32, CV_8U);
+    Frame blank = testing::blank_frame(i++);  // the lens covered: map 1 is lost young
     ASSERT_EQ(t->track(blank, {}).state, TrackingState::Lost);
     // Carried back to the first place: relocalised in map 0 and verified.
     for (x = 0.40; x < 0.50; ++i, x += 0.02) feed(*t, i, x);

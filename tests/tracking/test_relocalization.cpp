@@ -33,14 +33,6 @@ Scene make_scene(int n, unsigned seed) {
 // The camera looks down +z from (x, 0, 0): T_cw is a pure translation by -x.
 geo::SE3 camera_at(double x) { return geo::SE3(Eigen::Quaterniond::Identity(), Eigen::Vector3d(-x, 0, 0)); }
 
-Frame blank(std::size_t index) {
-  Frame f;
-  f.index = index;
-  f.stamp = static_cast<double>(index) / 30.0;
-  f.features.descriptors = cv::Mat(0, 32, CV_8U);
-  return f;
-}
-
 class Relocalization : public ::testing::Test {
  protected:
   void SetUp() override {
@@ -80,7 +72,7 @@ TEST_F(Relocalization, FindsAPoseFarFromWhereItWasLostAndVerifiesIt) {
   config_.relocalization_verify_frames = 3;
   auto t = make_tracker();
   build_map(*t, 40, 0.8);  // 2 cm a frame
-  Frame lost = blank(40);
+  Frame lost = testing::blank_frame(40);
   EXPECT_EQ(t->track(lost, {}).state, TrackingState::Lost);
   // Kidnapped back to 0.1 m (0.7 m from where it was lost), then moving on at 1 cm a frame.
   const TrackOutcome first = feed(*t, 41, 0.10);
@@ -113,7 +105,7 @@ TEST_F(Relocalization, RejectsAPoseTheNextFramesDoNotFollow) {
   config_.relocalization_verify_frames = 3;
   auto t = make_tracker();
   build_map(*t, 40, 0.8);
-  Frame lost = blank(40);
+  Frame lost = testing::blank_frame(40);
   t->track(lost, {});
   EXPECT_TRUE(feed(*t, 41, 0.10).relocalized);
   // The next frame is 30 cm away (the relocalised pose was not where the camera is): rejected.
@@ -136,7 +128,7 @@ TEST_F(Relocalization, WithoutVerificationThePoseIsTrustedAtOnce) {
   config_.relocalization_verify_frames = 0;
   auto t = make_tracker();
   build_map(*t, 40, 0.8);
-  Frame lost = blank(40);
+  Frame lost = testing::blank_frame(40);
   t->track(lost, {});
   const TrackOutcome o = feed(*t, 41, 0.10);
   EXPECT_TRUE(o.relocalized);
@@ -159,7 +151,7 @@ TEST_F(Relocalization, ProviderCandidatesAreTriedFirst) {
     return std::vector<map::KeyframeId>{ids.front()};
   });
   build_map(*t, 40, 0.8);
-  Frame lost = blank(40);
+  Frame lost = testing::blank_frame(40);
   t->track(lost, {});
   EXPECT_TRUE(asked.empty());  // the blank frame lost tracking; relocalisation starts on the next
   EXPECT_TRUE(feed(*t, 41, 0.02).relocalized);
