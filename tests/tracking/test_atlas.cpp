@@ -364,6 +364,72 @@ TEST_F(Atlas, AMergeWaitsForItsVerificationFrames) {
   }
 }
 
+// tracking.merge_min_inliers: the inliers a merge search's pose in the other map needs, apart from
+// relocalisation's min_inliers_after_reloc. Walking back into the first place, each frame sees a few
+// hundred of its points: a bar above that never merges, while relocalisation's bar is untouched.
+TEST_F(Atlas, AMergeNeedsMergeMinInliersInTheOtherMap) {
+  for (const int needed : {50, 2000}) {
+    SCOPED_TRACE(needed);
+    config_.merge_min_inliers = needed;
+    map::Map fresh;
+    auto [t, i, x] = carried_away(fresh, 41 + kLostBeforeNewMap);
+    ASSERT_EQ(t->open_maps().size(), 2u);
+    for (; x > 1.0; ++i, x -= 0.04) ASSERT_EQ(feed(*t, i, x).state, TrackingState::Ok) << i;
+    EXPECT_EQ(t->atlas_stats().merges, needed == 50 ? 1u : 0u);
+    EXPECT_EQ(t->open_maps().size(), needed == 50 ? 1u : 2u);
+  }
+}
+
+// tracking.new_map_seed_motion_frames: a camera that keeps walking while it cannot be tracked (here the
+// wall it walks along shows a texture the map has never seen, so relocalisation finds nothing) starts
+// its new map where the last trusted frames' motion carried it; held at the last trusted pose, the new
+// map and every frame tracked in it are off by the distance walked while lost (it never merges here).
+TEST_F(Atlas, ANewMapIsSeededWhereTheTrustedMotionCarriedTheCamera) {
+  World unseen_texture = world_;
+  std::mt19937 rng(77);
+  unseen_texture.descriptors = testing::random_descriptors(static_cast<int>(world_.points.size()), rng);
+  for (const int window : {0, 10}) {
+    SCOPED_TRACE(window);
+    config_.new_map_seed_motion_frames = window;
+    map::Map fresh;
+    auto t = make_tracker(fresh);
+    std::size_t i = walk_first_place(*t);  // x = 0.02 i: the last trusted frame 39 at x = 0.78
+    map::KeyframeId seed = map::kNoKeyframe;
+    std::size_t seeded_at = 0;
+    for (; i < 80; ++i) {
+      const double x = 0.02 * static_cast<double>(i);
+      truth_[i] = x;
+      Frame f = testing::synthetic_frame(unseen_texture, camera_at(x), i, cam_, depth_.bf);
+      const TrackOutcome o = t->track(f, {});
+      if (seed == map::kNoKeyframe && t->atlas_stats().maps_created == 2) {
+        seed = o.new_keyframe;
+        seeded_at = i;
+      }
+    }
+    ASSERT_NE(seed, map::kNoKeyframe);
+    EXPECT_EQ(t->atlas_stats().merges, 0u);
+    map::MapView view = fresh.view();
+    const double seed_x = view.keyframe(seed)->camera_center().x();
+    const double walked_lost = truth_[seeded_at] - 0.78;
+    ASSERT_GT(walked_lost, 0.15);
+    if (window == 0) {
+      EXPECT_NEAR(seed_x, 0.78, 1e-3);
+    } else {
+      EXPECT_NEAR(seed_x, truth_[seeded_at], 1e-3);
+    }
+    // Every frame tracked in the new map is as far off as its seed.
+    std::size_t in_new_map = 0;
+    for (const auto& p : t->trajectory().resolve(view)) {
+      const auto index = static_cast<std::size_t>(std::lround(p.stamp * 30.0));
+      if (index < seeded_at) continue;
+      ++in_new_map;
+      EXPECT_NEAR(p.T_wc.translation().x(), truth_.at(index) - (window == 0 ? walked_lost : 0.0), 0.005)
+          << index;
+    }
+    EXPECT_GE(in_new_map, 15u);
+  }
+}
+
 TEST(AtlasConfig, KeyIsReadAndRangeChecked) {
   EXPECT_EQ(TrackerConfig{}.new_map_after_lost_frames, 15);
   EXPECT_TRUE(TrackerConfig{}.drop_abandoned_young_maps);
@@ -373,6 +439,17 @@ TEST(AtlasConfig, KeyIsReadAndRangeChecked) {
   EXPECT_EQ(TrackerConfig{}.young_map_frames, 30);
   EXPECT_EQ(TrackerConfig{}.merge_verify_frames, 3);
   EXPECT_EQ(TrackerConfig{}.merge_verify_misses, 3);
+  EXPECT_EQ(TrackerConfig{}.merge_min_inliers, TrackerConfig{}.min_inliers_after_reloc);
+  EXPECT_THROW(TrackerConfig::from_yaml(ConfigReader::from_string("merge_min_inliers: 4\n", "t.yaml")),
+               Error);
+  EXPECT_EQ(TrackerConfig{}.new_map_seed_motion_frames, 0);  // off: measured, not adopted (session 44)
+  EXPECT_EQ(TrackerConfig{}.new_map_seed_max_frames, 30);
+  EXPECT_EQ(TrackerConfig::from_yaml(ConfigReader::from_string("new_map_seed_motion_frames: 10\n", "t.yaml"))
+                .new_map_seed_motion_frames,
+            10);
+  EXPECT_THROW(
+      TrackerConfig::from_yaml(ConfigReader::from_string("new_map_seed_motion_frames: 301\n", "t.yaml")),
+      Error);
   EXPECT_EQ(TrackerConfig::from_yaml(ConfigReader::from_string("merge_verify_frames: 6\n", "t.yaml"))
                 .merge_verify_frames,
             6);

@@ -40,6 +40,9 @@ TrackerConfig TrackerConfig::from_yaml(const ConfigReader& r) {
   r.read("merge_search_interval", c.merge_search_interval, 1, 10000);
   r.read("merge_verify_frames", c.merge_verify_frames, 0, 300);
   r.read("merge_verify_misses", c.merge_verify_misses, 0, 300);
+  r.read("merge_min_inliers", c.merge_min_inliers, 5, 10000);
+  r.read("new_map_seed_motion_frames", c.new_map_seed_motion_frames, 0, 300);
+  r.read("new_map_seed_max_frames", c.new_map_seed_max_frames, 0, 100000);
   r.read("still_people_reserve_keyframes", c.still_people_reserve_keyframes, 0, 100);
   r.read("still_people_reserve_max_age_frames", c.still_people_reserve_max_age_frames, 1, 100000);
   r.read("still_people_retry", c.still_people_retry);
@@ -73,6 +76,7 @@ Tracker::Tracker(map::Map& map, TrackerConfig config, geo::CameraIntrinsics came
       fps_(fps),
       policy_(make_keyframe_policy(config_.keyframes)),
       camera_model_{camera.fx, camera.fy, camera.cx, camera.cy, depth.bf},
+      trusted_motion_(config_.new_map_seed_motion_frames, config_.new_map_seed_max_frames),
       guard_(config_.guard),
       new_point_check_(config_.new_point_motion, camera),
       refiner_(config_.subpixel, camera, pyramid_) {}
@@ -301,6 +305,7 @@ void Tracker::record_pose(Frame& frame, const geo::SE3& reference_T_cw, TrackOut
     trajectory_.record(entry);
     lost_streak_ = 0;
     last_trusted_T_cw_ = frame.T_cw;
+    trusted_motion_.add(frame.index, frame.T_cw);
   }
 }
 

@@ -23,6 +23,7 @@
 #include "stillpoint/tracking/new_point_motion_check.hpp"
 #include "stillpoint/tracking/pose_guard.hpp"
 #include "stillpoint/tracking/trajectory_recorder.hpp"
+#include "stillpoint/tracking/trusted_motion.hpp"
 
 namespace sp::track {
 
@@ -89,6 +90,15 @@ struct TrackerConfig {
   // ... of which this many may find nothing in the other map without rejecting the candidate: a frame
   // that finds no pose there says nothing against the transform, only one found elsewhere does.
   int merge_verify_misses = 3;
+  // A merge search's pose in the other map needs this many local-map inliers (relocalisation needs
+  // min_inliers_after_reloc): the frame is tracked in its own map meanwhile, and the agreement of
+  // merge_agreeing_candidates and merge_verify_frames checks guard the transform.
+  int merge_min_inliers = 50;
+  // A new map is seeded at the last trusted pose carried on by the mean motion of the last this many
+  // trusted frames (TrustedMotion), for at most new_map_seed_max_frames lost frames. 0 or 1: at the
+  // last trusted pose itself.
+  int new_map_seed_motion_frames = 0;
+  int new_map_seed_max_frames = 30;
   // The features of people proven still that the last this many keyframes were made without
   // (Frame::reserve) are kept; when a frame cannot be tracked without the people (still_people_retry),
   // they are added to their keyframes and made map points from depth (docs/dynamic.md, "A last resort
@@ -221,12 +231,12 @@ class Tracker {
   bool track_reference_keyframe(Frame& frame);
   bool relocalize(Frame& frame);
   // Relocalisation's search: the first candidate keyframe that gives the frame a pose with
-  // min_inliers_after_reloc local-map inliers (frame.T_cw and matches set), once `agreeing_candidates`
+  // `min_inliers` local-map inliers (frame.T_cw and matches set), once `agreeing_candidates`
   // further ones that give a pose agree with it (PoseAgreement), or kNoKeyframe (none, or ambiguous).
   // Copies what it reads under short reads (a candidate's keyframe, then its local map) and matches and
   // solves on the copies without the lock.
   map::KeyframeId locate(Frame& frame, const std::vector<map::KeyframeId>& candidates,
-                         PointCounterUpdates& counters, int agreeing_candidates);
+                         PointCounterUpdates& counters, int agreeing_candidates, int min_inliers);
   // Atlas: a lost frame starts a new map when lost long enough (TrackerConfig::new_map_after_lost_frames).
   [[nodiscard]] bool new_map_due(const Frame& frame) const;
   // The map tracking is in was started by this tracker and lost within young_map_frames of its start.
@@ -320,6 +330,7 @@ class Tracker {
   std::optional<std::size_t> map_started_frame_;  // where this tracker started the current map
   std::size_t lost_streak_ = 0;                   // frames since the last trusted (written) one
   std::optional<geo::SE3> last_trusted_T_cw_;
+  TrustedMotion trusted_motion_;  // the last trusted frames, to seed a new map where the camera went
   struct PendingMerge {
     map::MapId other = map::kFirstMap;
     map::KeyframeId match = map::kNoKeyframe;

@@ -55,7 +55,8 @@ bool Tracker::relocalize(Frame& frame) {
       candidates = std::move(first);
     }
   }
-  const map::KeyframeId kid = locate(frame, candidates, counters_, config_.reloc_agreeing_candidates);
+  const map::KeyframeId kid = locate(frame, candidates, counters_, config_.reloc_agreeing_candidates,
+                                     config_.min_inliers_after_reloc);
   if (kid == map::kNoKeyframe) return false;
   reference_ = kid;
   last_reloc_frame_ = frame.index;
@@ -87,7 +88,7 @@ bool Tracker::relocalize(Frame& frame) {
 }
 
 map::KeyframeId Tracker::locate(Frame& frame, const std::vector<map::KeyframeId>& candidates,
-                                PointCounterUpdates& counters, int agreeing_candidates) {
+                                PointCounterUpdates& counters, int agreeing_candidates, int min_inliers) {
   // The first pose found, kept while further candidates are asked whether they agree with it.
   struct Found {
     map::KeyframeId keyframe;
@@ -160,7 +161,13 @@ map::KeyframeId Tracker::locate(Frame& frame, const std::vector<map::KeyframeId>
     snapshot_.index_copies();
     match_local_points(snapshot_, frame, local_points_, 2.0 * config_.local_search_factor,
                        MatchContext{camera_, pyramid_, depth_.bf}, counters);
-    if (optimize_pose(frame) < config_.min_inliers_after_reloc) continue;
+    if (optimize_pose(frame) < min_inliers) continue;
+    if (spdlog::should_log(spdlog::level::debug)) {
+      // Each candidate's camera centre, to set beside the ground truth when views repeat.
+      const Eigen::Vector3d c = frame.T_cw.inverse().translation();
+      spdlog::debug("frame {}: keyframe {} locates the camera centre at ({:.4f}, {:.4f}, {:.4f}), {} inliers",
+                    frame.index, kid, c.x(), c.y(), c.z(), frame.matched());
+    }
     if (!first) first = Found{kid, frame.T_cw, frame.points, frame.outlier, counters};
     const PoseAgreement::Verdict verdict = agreement.add(frame.T_cw);
     if (verdict == PoseAgreement::Verdict::Ambiguous) {
@@ -204,10 +211,14 @@ void Tracker::start_new_map(Frame& frame, TrackOutcome& out) {
   {
     map::MapView view = map_.view(&lock_clock_);
     counters_.apply(view);  // what the failed relocalisation saw, as on any lost frame
-    // Seeded at the last trusted pose: the best guess of where the camera is in the old map's frame
-    // (it is one only if the camera was not carried far); a merge later moves the map where it belongs.
+    // Seeded where the camera is believed to be in the old map's frame: the last trusted pose, carried on
+    // by the motion of the frames before it when new_map_seed_motion_frames is set (a camera hidden
+    // behind a person keeps moving). A map that merges later is moved where it belongs; one that never
+    // merges keeps this seed's error in every frame.
     frame.reset_matches();
-    frame.T_cw = *last_trusted_T_cw_;
+    frame.T_cw = config_.new_map_seed_motion_frames >= 2
+                     ? trusted_motion_.extrapolate(frame.index).value_or(*last_trusted_T_cw_)
+                     : *last_trusted_T_cw_;
     frame.has_pose = true;
     current_map_ = map::MapId{next_map_++};
     map_started_frame_ = frame.index;
@@ -217,8 +228,9 @@ void Tracker::start_new_map(Frame& frame, TrackOutcome& out) {
     reference_ = create_keyframe(view, frame, std::move(draft), config_.init_all_depth_points);
     spdlog::warn(
         "tracking lost for {} frames: frame {} starts map {} ({} keyframes in all maps) at the last "
-        "trusted pose",
-        lost_streak_, frame.index, map::to_int(current_map_), view.live_keyframes());
+        "trusted pose{}",
+        lost_streak_, frame.index, map::to_int(current_map_), view.live_keyframes(),
+        config_.new_map_seed_motion_frames >= 2 ? ", carried on by its motion" : "");
     state_ = TrackingState::Ok;
     velocity_.reset();
     pending_merge_.reset();
@@ -284,7 +296,8 @@ void Tracker::look_for_other_maps(Frame& frame) {
   const bool slots_fresh = local_slots_fresh_;
   refined_.assign(probe.features.size(), false);
   PointCounterUpdates ignored;  // the other map's points were not seen by a tracked frame of theirs
-  const map::KeyframeId match = locate(probe, candidates, ignored, config_.merge_agreeing_candidates);
+  const map::KeyframeId match =
+      locate(probe, candidates, ignored, config_.merge_agreeing_candidates, config_.merge_min_inliers);
   reference_ = reference;
   local_keyframes_ = local_keyframes;
   local_points_ = local_points;
@@ -387,6 +400,7 @@ void Tracker::look_for_other_maps(Frame& frame) {
   for (map::KeyframeId k : other_side) view.update_connections(k);
   if (from == current_map_ && last_trusted_T_cw_)
     last_trusted_T_cw_ = *last_trusted_T_cw_ * S_into_from.inverse();
+  if (from == current_map_) trusted_motion_.move_frame(S_into_from);
   if (from == current_map_) frame.T_cw = frame.T_cw * S_into_from.inverse();
   std::erase(open_maps_, from);
   if (into != current_map_) map_started_frame_.reset();
