@@ -81,6 +81,13 @@ class Atlas : public ::testing::Test {
     return c;
   }
 
+  // carried_away() up to the frame after the one that started map 1: two maps open.
+  Carried in_second_map(map::Map& map) {
+    Carried c = carried_away(map, 41 + kLostBeforeNewMap);
+    EXPECT_EQ(c.tracker->open_maps().size(), 2u);
+    return c;
+  }
+
   static constexpr int kLostBeforeNewMap = 10;
   map::Map map_;
   TrackerConfig config_;
@@ -286,8 +293,7 @@ TEST_F(Atlas, AMergeCheckThatFindsNothingIsAMissNotARejection) {
     config_.merge_verify_frames = 3;
     config_.merge_verify_misses = misses;
     map::Map fresh;
-    auto [t, i, x] = carried_away(fresh, 41 + kLostBeforeNewMap);
-    ASSERT_EQ(t->open_maps().size(), 2u);
+    auto [t, i, x] = in_second_map(fresh);
     std::size_t candidate_at = 0;
     for (; x > 1.0 && candidate_at == 0; ++i, x -= 0.04) {
       ASSERT_EQ(feed(*t, i, x).state, TrackingState::Ok) << i;
@@ -350,8 +356,7 @@ TEST_F(Atlas, AMergeWaitsForItsVerificationFrames) {
     SCOPED_TRACE(verify);
     config_.merge_verify_frames = verify;
     map::Map fresh;
-    auto [t, i, x] = carried_away(fresh, 41 + kLostBeforeNewMap);
-    ASSERT_EQ(t->open_maps().size(), 2u);
+    auto [t, i, x] = in_second_map(fresh);
     std::size_t candidate_at = 0, merged_at = 0;
     for (; x > 1.0 && merged_at == 0; ++i, x -= 0.04) {
       ASSERT_EQ(feed(*t, i, x).state, TrackingState::Ok) << i;
@@ -372,8 +377,7 @@ TEST_F(Atlas, AMergeNeedsMergeMinInliersInTheOtherMap) {
     SCOPED_TRACE(needed);
     config_.merge_min_inliers = needed;
     map::Map fresh;
-    auto [t, i, x] = carried_away(fresh, 41 + kLostBeforeNewMap);
-    ASSERT_EQ(t->open_maps().size(), 2u);
+    auto [t, i, x] = in_second_map(fresh);
     for (; x > 1.0; ++i, x -= 0.04) ASSERT_EQ(feed(*t, i, x).state, TrackingState::Ok) << i;
     EXPECT_EQ(t->atlas_stats().merges, needed == 50 ? 1u : 0u);
     EXPECT_EQ(t->open_maps().size(), needed == 50 ? 1u : 2u);
