@@ -304,7 +304,6 @@ void Tracker::record_pose(Frame& frame, const geo::SE3& reference_T_cw, TrackOut
   } else {
     trajectory_.record(entry);
     lost_streak_ = 0;
-    last_trusted_T_cw_ = frame.T_cw;
     trusted_motion_.add(frame.index, frame.T_cw);
   }
 }

@@ -329,8 +329,7 @@ class Tracker {
   std::vector<map::MapId> open_maps_;             // maps not merged into another
   std::optional<std::size_t> map_started_frame_;  // where this tracker started the current map
   std::size_t lost_streak_ = 0;                   // frames since the last trusted (written) one
-  std::optional<geo::SE3> last_trusted_T_cw_;
-  TrustedMotion trusted_motion_;  // the last trusted frames, to seed a new map where the camera went
+  TrustedMotion trusted_motion_;  // the last trusted pose and those before it (a new map's seed)
   struct PendingMerge {
     map::MapId other = map::kFirstMap;
     map::KeyframeId match = map::kNoKeyframe;

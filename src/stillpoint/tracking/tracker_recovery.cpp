@@ -198,7 +198,7 @@ bool Tracker::lost_young(const Frame& frame) const {
 }
 
 bool Tracker::new_map_due(const Frame& frame) const {
-  if (config_.new_map_after_lost_frames <= 0 || !last_trusted_T_cw_ || verify_left_ > 0) return false;
+  if (config_.new_map_after_lost_frames <= 0 || !trusted_motion_.has_pose() || verify_left_ > 0) return false;
   // A map lost young does not wait.
   const bool young = lost_young(frame);
   if (!young && lost_streak_ < static_cast<std::size_t>(config_.new_map_after_lost_frames)) return false;
@@ -216,9 +216,7 @@ void Tracker::start_new_map(Frame& frame, TrackOutcome& out) {
     // behind a person keeps moving). A map that merges later is moved where it belongs; one that never
     // merges keeps this seed's error in every frame.
     frame.reset_matches();
-    frame.T_cw = config_.new_map_seed_motion_frames >= 2
-                     ? trusted_motion_.extrapolate(frame.index).value_or(*last_trusted_T_cw_)
-                     : *last_trusted_T_cw_;
+    frame.T_cw = *trusted_motion_.extrapolate(frame.index);  // new_map_due(): a trusted pose exists
     frame.has_pose = true;
     current_map_ = map::MapId{next_map_++};
     map_started_frame_ = frame.index;
@@ -398,8 +396,6 @@ void Tracker::look_for_other_maps(Frame& frame) {
   for (map::KeyframeId k : side) fused += fuse_into_keyframe(view, k, points, 4.0, ctx);
   for (map::KeyframeId k : side) view.update_connections(k);
   for (map::KeyframeId k : other_side) view.update_connections(k);
-  if (from == current_map_ && last_trusted_T_cw_)
-    last_trusted_T_cw_ = *last_trusted_T_cw_ * S_into_from.inverse();
   if (from == current_map_) trusted_motion_.move_frame(S_into_from);
   if (from == current_map_) frame.T_cw = frame.T_cw * S_into_from.inverse();
   std::erase(open_maps_, from);

@@ -22,9 +22,10 @@ class TrustedMotion {
   void add(std::size_t frame_index, const geo::SE3& T_cw);
   // The map's frame moved (a merge): p_new = S * p_old for every pose kept.
   void move_frame(const geo::SE3& S_new_old);
-  void clear() { poses_.clear(); }
+  [[nodiscard]] bool has_pose() const { return !poses_.empty(); }
   // The pose at frame_index by the mean motion per frame over the window, carried on for at most
-  // max_frames frames after the last trusted one; without a motion (fewer than 2 poses), the last pose.
+  // max_frames frames after the last trusted one; without a motion (fewer than 2 poses, a window below
+  // 2), the last pose itself; none before the first trusted pose.
   [[nodiscard]] std::optional<geo::SE3> extrapolate(std::size_t frame_index) const;
 
  private:
