@@ -101,6 +101,8 @@ PoseOptimizerConfig PoseOptimizerConfig::from_yaml(const ConfigReader& r) {
   r.read("motion_prior_m", c.motion_prior_m, 0.0, 1.0);
   r.read("motion_prior_deg", c.motion_prior_deg, 0.0, 45.0);
   r.read("motion_prior_max_matches", c.motion_prior_max_matches, 0, 100000);
+  r.read("start_outlier_factor", c.start_outlier_factor, 0.0, 1000.0);
+  r.read("start_outlier_with_prior_only", c.start_outlier_with_prior_only);
   if ((c.motion_prior_m > 0.0) != (c.motion_prior_deg > 0.0))
     r.fail("motion_prior_m", "motion_prior_m and motion_prior_deg are both 0 (no prior) or both > 0");
   return c;
@@ -119,6 +121,20 @@ PoseOptimizationResult optimize_pose(geo::SE3& T_cw, const std::vector<PoseObser
   std::vector<double> sqrt_info(n);
   for (std::size_t i = 0; i < n; ++i) sqrt_info[i] = std::sqrt(std::max(observations[i].inv_sigma2, 0.0));
 
+  if (config.start_outlier_factor > 0.0 && (prior != nullptr || !config.start_outlier_with_prior_only)) {
+    const Eigen::Matrix3d R = T_cw.rotation();
+    std::vector<bool> far_off(n, false);
+    std::size_t fitting = 0;
+    for (std::size_t i = 0; i < n; ++i) {
+      const PoseObservation& o = observations[i];
+      const Reprojection rep = evaluate_reprojection(camera, R, T_cw.translation(), o.point_w, o.uv,
+                                                     o.u_right, sqrt_info[i], false, false);
+      fitting += rep.is_outlier(config.chi2_mono, config.chi2_stereo) ? 0 : 1;
+      far_off[i] = rep.is_outlier(config.start_outlier_factor * config.chi2_mono,
+                                  config.start_outlier_factor * config.chi2_stereo);
+    }
+    if (2 * fitting >= n) result.outlier = far_off;
+  }
   Problem p{observations,
             sqrt_info,
             result.outlier,

@@ -36,6 +36,13 @@ struct PoseOptimizerConfig {
   // The prior only in solves with fewer matched map points than this (0: every solve): with many
   // points spread over the view it is not needed, and a wrong prediction would only pull.
   int motion_prior_max_matches = 100;
+  // An observation whose chi-square at the start pose is above this many times the outlier threshold
+  // sits out the first round, when the start pose fits at least half of them within the threshold
+  // (0: off). A few close points on a person the detector missed, off by 20 px where the rest are
+  // off by 1, otherwise drag the first round's pose centimetres sideways, and there they fit.
+  double start_outlier_factor = 0.0;
+  // ... only in solves with the motion prior (few matched points, where a few can decide the pose).
+  bool start_outlier_with_prior_only = true;
   [[nodiscard]] bool has_motion_prior() const { return motion_prior_m > 0.0 && motion_prior_deg > 0.0; }
   static PoseOptimizerConfig from_yaml(const ConfigReader& r);
 };
