@@ -2,6 +2,7 @@
 
 #include <Eigen/Cholesky>
 #include <cmath>
+#include <utility>
 
 namespace sp::opt {
 namespace {
@@ -89,6 +90,26 @@ void levenberg_marquardt(const Problem& p, geo::SE3& T, int iterations) {
   }
 }
 
+// The start-pose gate (PoseOptimizerConfig::start_outlier_factor): marks the observations far off at
+// T_cw as outliers for the first round, provided T_cw fits at least half of them; else leaves `outlier`.
+void sit_out_far_off_at_start(const geo::SE3& T_cw, const std::vector<PoseObservation>& observations,
+                              const std::vector<double>& sqrt_info, const CameraModel& camera,
+                              const PoseOptimizerConfig& config, std::vector<bool>& outlier) {
+  const std::size_t n = observations.size();
+  const Eigen::Matrix3d R = T_cw.rotation();
+  std::vector<bool> far_off(n, false);
+  std::size_t fitting = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    const PoseObservation& o = observations[i];
+    const Reprojection rep = evaluate_reprojection(camera, R, T_cw.translation(), o.point_w, o.uv, o.u_right,
+                                                   sqrt_info[i], false, false);
+    fitting += rep.is_outlier(config.chi2_mono, config.chi2_stereo) ? 0 : 1;
+    far_off[i] = rep.is_outlier(config.start_outlier_factor * config.chi2_mono,
+                                config.start_outlier_factor * config.chi2_stereo);
+  }
+  if (2 * fitting >= n) outlier = std::move(far_off);
+}
+
 }  // namespace
 
 PoseOptimizerConfig PoseOptimizerConfig::from_yaml(const ConfigReader& r) {
@@ -121,20 +142,8 @@ PoseOptimizationResult optimize_pose(geo::SE3& T_cw, const std::vector<PoseObser
   std::vector<double> sqrt_info(n);
   for (std::size_t i = 0; i < n; ++i) sqrt_info[i] = std::sqrt(std::max(observations[i].inv_sigma2, 0.0));
 
-  if (config.start_outlier_factor > 0.0 && (prior != nullptr || !config.start_outlier_with_prior_only)) {
-    const Eigen::Matrix3d R = T_cw.rotation();
-    std::vector<bool> far_off(n, false);
-    std::size_t fitting = 0;
-    for (std::size_t i = 0; i < n; ++i) {
-      const PoseObservation& o = observations[i];
-      const Reprojection rep = evaluate_reprojection(camera, R, T_cw.translation(), o.point_w, o.uv,
-                                                     o.u_right, sqrt_info[i], false, false);
-      fitting += rep.is_outlier(config.chi2_mono, config.chi2_stereo) ? 0 : 1;
-      far_off[i] = rep.is_outlier(config.start_outlier_factor * config.chi2_mono,
-                                  config.start_outlier_factor * config.chi2_stereo);
-    }
-    if (2 * fitting >= n) result.outlier = far_off;
-  }
+  if (config.start_outlier_factor > 0.0 && (prior != nullptr || !config.start_outlier_with_prior_only))
+    sit_out_far_off_at_start(T_cw, observations, sqrt_info, camera, config, result.outlier);
   Problem p{observations,
             sqrt_info,
             result.outlier,
