@@ -90,24 +90,34 @@ void levenberg_marquardt(const Problem& p, geo::SE3& T, int iterations) {
   }
 }
 
-// The start-pose gate (PoseOptimizerConfig::start_outlier_factor): marks the observations far off at
-// T_cw as outliers for the first round, provided T_cw fits at least half of them; else leaves `outlier`.
-void sit_out_far_off_at_start(const geo::SE3& T_cw, const std::vector<PoseObservation>& observations,
-                              const std::vector<double>& sqrt_info, const CameraModel& camera,
-                              const PoseOptimizerConfig& config, std::vector<bool>& outlier) {
-  const std::size_t n = observations.size();
+// ORB-SLAM's chi-square test of every observation at T_cw, its thresholds scaled by `factor`: marks
+// each one above it in `outlier`; returns how many pass.
+int classify_outliers(const geo::SE3& T_cw, const std::vector<PoseObservation>& observations,
+                      const std::vector<double>& sqrt_info, const CameraModel& camera,
+                      const PoseOptimizerConfig& config, double factor, std::vector<bool>& outlier) {
   const Eigen::Matrix3d R = T_cw.rotation();
-  std::vector<bool> far_off(n, false);
-  std::size_t fitting = 0;
-  for (std::size_t i = 0; i < n; ++i) {
+  int inliers = 0;
+  for (std::size_t i = 0; i < observations.size(); ++i) {
     const PoseObservation& o = observations[i];
     const Reprojection rep = evaluate_reprojection(camera, R, T_cw.translation(), o.point_w, o.uv, o.u_right,
                                                    sqrt_info[i], false, false);
-    fitting += rep.is_outlier(config.chi2_mono, config.chi2_stereo) ? 0 : 1;
-    far_off[i] = rep.is_outlier(config.start_outlier_factor * config.chi2_mono,
-                                config.start_outlier_factor * config.chi2_stereo);
+    outlier[i] = rep.is_outlier(factor * config.chi2_mono, factor * config.chi2_stereo);
+    if (!outlier[i]) ++inliers;
   }
-  if (2 * fitting >= n) outlier = std::move(far_off);
+  return inliers;
+}
+
+// The start-pose gate (PoseOptimizerConfig::start_outlier_factor): the observations far off at T_cw
+// are outliers for the first round, provided T_cw fits at least half of them; else `outlier` stays.
+void sit_out_far_off_at_start(const geo::SE3& T_cw, const std::vector<PoseObservation>& observations,
+                              const std::vector<double>& sqrt_info, const CameraModel& camera,
+                              const PoseOptimizerConfig& config, std::vector<bool>& outlier) {
+  std::vector<bool> far_off(observations.size());
+  const int fitting = classify_outliers(T_cw, observations, sqrt_info, camera, config, 1.0, far_off);
+  if (2 * static_cast<std::size_t>(fitting) < observations.size()) return;
+  (void)classify_outliers(T_cw, observations, sqrt_info, camera, config, config.start_outlier_factor,
+                          far_off);
+  outlier = std::move(far_off);
 }
 
 }  // namespace
@@ -159,15 +169,7 @@ PoseOptimizationResult optimize_pose(geo::SE3& T_cw, const std::vector<PoseObser
     levenberg_marquardt(p, T_cw, config.iterations);
 
     // Re-classify every observation, including last round's outliers (they may come back).
-    const Eigen::Matrix3d R = T_cw.rotation();
-    result.inliers = 0;
-    for (std::size_t i = 0; i < n; ++i) {
-      const PoseObservation& o = observations[i];
-      const Reprojection rep = evaluate_reprojection(camera, R, T_cw.translation(), o.point_w, o.uv,
-                                                     o.u_right, sqrt_info[i], false, false);
-      result.outlier[i] = rep.is_outlier(config.chi2_mono, config.chi2_stereo);
-      if (!result.outlier[i]) ++result.inliers;
-    }
+    result.inliers = classify_outliers(T_cw, observations, sqrt_info, camera, config, 1.0, result.outlier);
     if (result.inliers < 10) break;  // too few to trust another round (as ORB-SLAM)
   }
   return result;
